@@ -1,0 +1,95 @@
+# The one place where Carousel targets get their warnings, sanitizers, clang-tidy and include
+# directories. (-Wno-missing-field-initializers: every struct has default member initialisers,
+# so designated initialisers like `{.overwrite = false}` leave nothing uninitialised.) Every module uses these helpers instead of add_library/add_executable directly.
+#
+#   carousel_add_library(NAME
+#       [SOURCES src...]            # none: an INTERFACE (header-only / contract) library
+#       [PUBLIC_LINKS targets...] [PRIVATE_LINKS targets...]
+#       [LANGUAGE_C99])             # pure C99 library (firmware-protocol)
+#   carousel_add_executable(NAME SOURCES src... [PRIVATE_LINKS targets...] [OUTPUT_NAME name])
+#   carousel_add_test(NAME SOURCES src... [LINKS targets...] LABELS unit|integration|e2e
+#       [TIMEOUT seconds])          # one GoogleTest binary, each test registered with CTest
+include_guard(GLOBAL)
+include(GoogleTest)
+
+if(CAROUSEL_CLANG_TIDY)
+  find_program(CAROUSEL_CLANG_TIDY_EXE NAMES clang-tidy clang-tidy-14 REQUIRED)
+endif()
+
+function(_carousel_apply_defaults target)
+  get_target_property(_type ${target} TYPE)
+  if(_type STREQUAL "INTERFACE_LIBRARY")
+    return()
+  endif()
+  target_compile_options(${target} PRIVATE
+    $<$<OR:$<COMPILE_LANGUAGE:CXX>,$<COMPILE_LANGUAGE:C>>:-Wall -Wextra -Wpedantic -Wshadow=local
+      -Wno-missing-field-initializers>
+    $<$<COMPILE_LANGUAGE:CXX>:-Wnon-virtual-dtor -Woverloaded-virtual>)
+  if(CAROUSEL_WERROR)
+    target_compile_options(${target} PRIVATE -Werror)
+  endif()
+  # GCC's -Wmaybe-uninitialized gives false positives under -fsanitize (seen in OpenMesh's
+  # property containers at -O1); the Release build keeps the warning.
+  target_compile_options(${target} PRIVATE $<$<CONFIG:Sanitize>:-Wno-maybe-uninitialized>)
+  # Lets tests assert that a Sanitize build really is instrumented.
+  target_compile_definitions(${target} PRIVATE $<$<CONFIG:Sanitize>:CAROUSEL_SANITIZE_BUILD=1>)
+  if(CAROUSEL_CLANG_TIDY)
+    set_target_properties(${target} PROPERTIES
+      CXX_CLANG_TIDY "${CAROUSEL_CLANG_TIDY_EXE};--quiet"
+      C_CLANG_TIDY "${CAROUSEL_CLANG_TIDY_EXE};--quiet")
+  endif()
+endfunction()
+
+function(carousel_add_library name)
+  cmake_parse_arguments(ARG "LANGUAGE_C99" "" "SOURCES;PUBLIC_LINKS;PRIVATE_LINKS" ${ARGN})
+  set(_include_dir "${CMAKE_CURRENT_SOURCE_DIR}/include")
+  if(ARG_SOURCES)
+    add_library(${name} ${ARG_SOURCES})
+    target_include_directories(${name}
+      PUBLIC $<BUILD_INTERFACE:${_include_dir}>
+      PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/src)
+    target_link_libraries(${name} PUBLIC ${ARG_PUBLIC_LINKS} PRIVATE ${ARG_PRIVATE_LINKS})
+    if(ARG_LANGUAGE_C99)
+      set_target_properties(${name} PROPERTIES C_STANDARD 99 C_STANDARD_REQUIRED ON C_EXTENSIONS OFF)
+    endif()
+  else()
+    add_library(${name} INTERFACE)
+    target_include_directories(${name} INTERFACE $<BUILD_INTERFACE:${_include_dir}>)
+    target_link_libraries(${name} INTERFACE ${ARG_PUBLIC_LINKS})
+  endif()
+  _carousel_apply_defaults(${name})
+endfunction()
+
+function(carousel_add_executable name)
+  cmake_parse_arguments(ARG "" "OUTPUT_NAME" "SOURCES;PRIVATE_LINKS" ${ARGN})
+  add_executable(${name} ${ARG_SOURCES})
+  target_link_libraries(${name} PRIVATE ${ARG_PRIVATE_LINKS})
+  if(ARG_OUTPUT_NAME)
+    set_target_properties(${name} PROPERTIES OUTPUT_NAME ${ARG_OUTPUT_NAME})
+  endif()
+  set_target_properties(${name} PROPERTIES RUNTIME_OUTPUT_DIRECTORY "${CMAKE_BINARY_DIR}/bin")
+  _carousel_apply_defaults(${name})
+endfunction()
+
+function(carousel_add_test name)
+  cmake_parse_arguments(ARG "" "TIMEOUT" "SOURCES;LINKS;LABELS" ${ARGN})
+  if(NOT ARG_LABELS)
+    message(FATAL_ERROR "carousel_add_test(${name}): LABELS unit|integration|e2e is required")
+  endif()
+  foreach(_label IN LISTS ARG_LABELS)
+    if(NOT _label MATCHES "^(unit|integration|e2e)$")
+      message(FATAL_ERROR "carousel_add_test(${name}): unknown label '${_label}'")
+    endif()
+  endforeach()
+  if(NOT ARG_TIMEOUT)
+    set(ARG_TIMEOUT 300)
+  endif()
+  add_executable(${name} ${ARG_SOURCES})
+  target_link_libraries(${name} PRIVATE carousel_testing ${ARG_LINKS} GTest::gmock GTest::gtest_main)
+  set_target_properties(${name} PROPERTIES RUNTIME_OUTPUT_DIRECTORY "${CMAKE_BINARY_DIR}/tests")
+  _carousel_apply_defaults(${name})
+  gtest_discover_tests(${name}
+    DISCOVERY_MODE PRE_TEST
+    TEST_PREFIX "${name}."
+    PROPERTIES LABELS "${ARG_LABELS}" TIMEOUT ${ARG_TIMEOUT})
+endfunction()

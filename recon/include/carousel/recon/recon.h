@@ -1,0 +1,12 @@
+// recon: shape from silhouette (contract; issue 4 builds it).
+//
+// Input: std::vector<View> (photo + camera), never a calibration file. Stages, each
+// `Result Stage(const Inputs&, const Options&, Progress&)`:
+//   Silhouettes   alpha mask per photo (backdrop keying, background-plate differencing,
+//                 boundary refinement, turntable plate removal) -> masks/ as 8-bit PNG
+//   VisualHull    octree carving with mask distance transforms, marching cubes at sub-voxel
+//                 accuracy, largest watertight component; outside an image = unknown
+//   OptimizeMesh  Taubin smoothing, isotropic remeshing, quadric decimation to a face count
+//                 (default 4,500); closed, manifold, outward-oriented Mesh
+// recon never includes calib or texture.
+#pragma once
