@@ -1,0 +1,120 @@
+#include "carousel/studio/cli.h"
+
+#include <sys/wait.h>
+
+#include <array>
+#include <cstdio>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "carousel/testing/testing.h"
+
+namespace carousel::studio {
+namespace {
+
+using ::testing::HasSubstr;
+
+struct CliResult {
+  int code;
+  std::string out;
+  std::string err;
+};
+
+CliResult RunCarousel(std::vector<const char*> args) {
+  args.insert(args.begin(), "carousel");
+  std::ostringstream out, err;
+  const int code = RunCli(static_cast<int>(args.size()), args.data(), out, err);
+  return {code, out.str(), err.str()};
+}
+
+const char* const kSubcommands[] = {"sim", "import", "reconstruct", "texture",  "process",
+                                    "run", "camera", "turntable",   "calibrate"};
+
+TEST(CliTest, HelpListsEverySubcommand) {
+  const CliResult result = RunCarousel({"--help"});
+  EXPECT_EQ(result.code, kExitOk);
+  for (const char* name : kSubcommands) EXPECT_THAT(result.out, HasSubstr(name)) << name;
+  EXPECT_THAT(result.out, HasSubstr("self-check"));
+}
+
+TEST(CliTest, VersionNamesTheLibraries) {
+  const CliResult result = RunCarousel({"--version"});
+  EXPECT_EQ(result.code, kExitOk);
+  EXPECT_THAT(result.out, HasSubstr("carousel 0."));
+  EXPECT_THAT(result.out, HasSubstr("OpenCV 4."));
+  EXPECT_THAT(result.out, HasSubstr("OpenMesh 9."));
+}
+
+TEST(CliTest, UnbuiltSubcommandsSaySoAndFail) {
+  for (const char* name : kSubcommands) {
+    const CliResult result = RunCarousel({name, "--some-flag", "value"});
+    EXPECT_EQ(result.code, kExitUnavailable) << name;
+    EXPECT_THAT(result.err, HasSubstr(std::string("carousel ") + name + ": not built yet"));
+    EXPECT_THAT(result.err, HasSubstr("issue"));
+  }
+}
+
+TEST(CliTest, UsageErrorsExitWith64) {
+  EXPECT_EQ(RunCarousel({}).code, kExitUsage);
+  EXPECT_EQ(RunCarousel({"frobnicate"}).code, kExitUsage);
+  const CliResult bad_level = RunCarousel({"--log-level", "chatty", "self-check"});
+  EXPECT_EQ(bad_level.code, kExitUsage);
+  EXPECT_THAT(bad_level.err, HasSubstr("unknown log level 'chatty'"));
+  const CliResult bad_points = RunCarousel({"self-check", "--points", "0"});
+  EXPECT_EQ(bad_points.code, kExitUsage);
+  EXPECT_THAT(bad_points.err, HasSubstr("SelfCheckOptions.points"));
+}
+
+TEST(CliTest, SelfCheckPassesOnThisBuild) {
+  testing::TempDir scratch;
+  const std::string data = testing::SharedDataDir().string();
+  const std::string scratch_dir = scratch.path().string();
+  const CliResult result =
+      RunCarousel({"self-check", "--data", data.c_str(), "--scratch", scratch_dir.c_str()});
+  EXPECT_EQ(result.code, kExitOk) << result.out << result.err;
+  EXPECT_THAT(result.out, HasSubstr("PASS  camera model vs OpenCV"));
+  EXPECT_THAT(result.out, HasSubstr("PASS  shared test data"));
+  EXPECT_THAT(result.out, HasSubstr("self-check passed"));
+  EXPECT_THAT(result.err, HasSubstr("self-check: 100%"));
+  // The scratch folder given by the user is kept; only the check's own files go.
+  EXPECT_TRUE(std::filesystem::is_directory(scratch.path()));
+  EXPECT_TRUE(std::filesystem::is_empty(scratch.path()));
+}
+
+TEST(CliTest, SelfCheckReportsABrokenDataFolder) {
+  testing::TempDir data;  // exists, but holds none of the expected files
+  const std::string dir = data.path().string();
+  const CliResult result = RunCarousel({"self-check", "--data", dir.c_str()});
+  EXPECT_EQ(result.code, kExitFailure);
+  EXPECT_THAT(result.out, HasSubstr("FAIL  shared test data"));
+  EXPECT_THAT(result.out, HasSubstr("Duck.obj: no such file"));
+}
+
+// The installed program as a user runs it, in a child process.
+CliResult RunBinary(const std::string& arguments) {
+  const std::string command = (testing::BinDir() / "carousel").string() + " " + arguments + " 2>&1";
+  FILE* pipe = ::popen(command.c_str(), "r");
+  if (pipe == nullptr) return {-1, "", "popen failed"};
+  std::string output;
+  std::array<char, 4096> buffer{};
+  while (std::size_t n = std::fread(buffer.data(), 1, buffer.size(), pipe))
+    output.append(buffer.data(), n);
+  const int status = ::pclose(pipe);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, output, ""};
+}
+
+TEST(CliBinaryTest, HelpAndUnbuiltCommandFromTheExecutable) {
+  const CliResult help = RunBinary("--help");
+  EXPECT_EQ(help.code, 0) << help.out;
+  for (const char* name : kSubcommands) EXPECT_THAT(help.out, HasSubstr(name));
+  const CliResult texture = RunBinary("texture SESSION");
+  EXPECT_EQ(texture.code, kExitUnavailable) << texture.out;
+  EXPECT_THAT(texture.out, HasSubstr("not built yet"));
+}
+
+}  // namespace
+}  // namespace carousel::studio
