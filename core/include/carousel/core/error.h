@@ -87,24 +87,24 @@ namespace internal {
 
 // CAROUSEL_CHECK(cond, message-stream): throws InternalError when cond is false. For invariants
 // that only a bug can break. The message is a stream expression: CAROUSEL_CHECK(n > 0, "n=" << n).
-#define CAROUSEL_CHECK(condition, message)                                    \
-  do {                                                                        \
-    if (!(condition)) {                                                       \
-      std::ostringstream carousel_check_stream_;                              \
-      carousel_check_stream_ << message;                                      \
-      ::carousel::internal::ThrowCheckFailure(__FILE__, __LINE__, #condition, \
-                                              carousel_check_stream_.str());  \
-    }                                                                         \
+#define CAROUSEL_CHECK(condition, message)                                        \
+  do {                                                                            \
+    if (!(condition)) {                                                           \
+      std::ostringstream carousel_check_stream_;                                  \
+      carousel_check_stream_ << message; /* NOLINT(bugprone-macro-parentheses) */ \
+      ::carousel::internal::ThrowCheckFailure(__FILE__, __LINE__, #condition,     \
+                                              carousel_check_stream_.str());      \
+    }                                                                             \
   } while (false)
 
 // CAROUSEL_THROW_IF(cond, ErrorType, args-building-the-message): for input validation, e.g.
 //   CAROUSEL_THROW_IF(fx <= 0, InvalidArgument, "CameraModel.fx must be > 0, got " << fx);
 // The message is a stream expression; ErrorType must take a single std::string.
-#define CAROUSEL_THROW_IF(condition, ErrorType, message) \
-  do {                                                   \
-    if (condition) {                                     \
-      std::ostringstream carousel_throw_stream_;         \
-      carousel_throw_stream_ << message;                 \
-      throw ErrorType(carousel_throw_stream_.str());     \
-    }                                                    \
+#define CAROUSEL_THROW_IF(condition, ErrorType, message)                                      \
+  do {                                                                                        \
+    if (condition) {                                                                          \
+      std::ostringstream carousel_throw_stream_;                                              \
+      carousel_throw_stream_ << message;             /* NOLINT(bugprone-macro-parentheses) */ \
+      throw ErrorType(carousel_throw_stream_.str()); /* NOLINT(bugprone-macro-parentheses) */ \
+    }                                                                                         \
   } while (false)

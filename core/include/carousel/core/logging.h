@@ -27,13 +27,13 @@ LogLevel ParseLogLevel(std::string_view name);
 
 }  // namespace carousel
 
-#define CAROUSEL_LOG(level, message)                      \
-  do {                                                    \
-    if (::carousel::LogEnabled(level)) {                  \
-      std::ostringstream carousel_log_stream_;            \
-      carousel_log_stream_ << message;                    \
-      ::carousel::Log(level, carousel_log_stream_.str()); \
-    }                                                     \
+#define CAROUSEL_LOG(level, message)                                            \
+  do {                                                                          \
+    if (::carousel::LogEnabled(level)) {                                        \
+      std::ostringstream carousel_log_stream_;                                  \
+      carousel_log_stream_ << message; /* NOLINT(bugprone-macro-parentheses) */ \
+      ::carousel::Log(level, carousel_log_stream_.str());                       \
+    }                                                                           \
   } while (false)
 #define CAROUSEL_LOG_DEBUG(message) CAROUSEL_LOG(::carousel::LogLevel::kDebug, message)
 #define CAROUSEL_LOG_INFO(message) CAROUSEL_LOG(::carousel::LogLevel::kInfo, message)

@@ -46,7 +46,7 @@ class Mesh : public TriMeshBase {
   Mesh& operator=(const Mesh& other) = default;
   Mesh(Mesh&& other) = default;
   Mesh& operator=(Mesh&& other) = default;
-  ~Mesh() = default;
+  ~Mesh() override = default;
 
   // Chart (texture/ partitioning) of a face; kNoChart before partitioning.
   int chart_id(FaceHandle face) const { return property(chart_id_, face).value; }
