@@ -15,7 +15,9 @@
 #include "carousel/core/logging.h"
 #include "carousel/core/progress.h"
 #include "carousel/core/version.h"
+#include "carousel/studio/import.h"
 #include "carousel/studio/self_check.h"
+#include "carousel/studio/sim_capture.h"
 #include "carousel/studio/terminal_progress.h"
 
 namespace carousel::studio {
@@ -30,10 +32,6 @@ struct PlannedCommand {
 };
 
 constexpr PlannedCommand kPlannedCommands[] = {
-    {"sim", "simulated rig: render a capture session of a scene, run emulated devices",
-     "issue 3 (simulated rig)"},
-    {"import", "turn a calibrated dataset (Middlebury, COLMAP) into a session",
-     "issue 3 (simulated rig, dataset import)"},
     {"reconstruct", "silhouettes, visual hull and optimized mesh of a session",
      "issue 4 (reconstruction)"},
     {"texture", "texture atlas and texture map of a session's mesh; export OBJ and GLB",
@@ -70,19 +68,121 @@ class InterruptScope {
   void (*previous_)(int) = SIG_DFL;
 };
 
+// The shared test data: $CAROUSEL_SHARED_DATA_DIR, else the folder this build was configured
+// with (../shared/data beside the checkout).
 std::filesystem::path DefaultDataDir() {
   if (const char* env = std::getenv("CAROUSEL_SHARED_DATA_DIR"); env != nullptr && *env) {
     return env;
   }
-  return {};
+  return CAROUSEL_DEFAULT_SHARED_DATA_DIR;
+}
+
+// "5184x3456" -> width, height.
+void ParseSize(const std::string& text, int* width, int* height) {
+  const std::size_t x = text.find('x');
+  try {
+    std::size_t used_w = 0, used_h = 0;
+    *width = std::stoi(text.substr(0, x), &used_w);
+    const std::string rest = x == std::string::npos ? "" : text.substr(x + 1);
+    *height = std::stoi(rest, &used_h);
+    if (used_w != x || used_h != rest.size()) throw std::invalid_argument(text);
+  } catch (const std::logic_error&) {
+    throw InvalidArgument("--size must look like 5184x3456, got '" + text + "'");
+  }
+}
+
+// "white", "grey", "green", "black" or "#rrggbb" -> sRGB 0..1.
+Eigen::Vector3d ParseColour(const std::string& text) {
+  if (text == "white") return {0.96, 0.96, 0.96};
+  if (text == "grey" || text == "gray") return {0.5, 0.5, 0.5};
+  if (text == "green") return {0.1, 0.65, 0.25};
+  if (text == "black") return {0.03, 0.03, 0.03};
+  if (text.size() == 7 && text[0] == '#') {
+    try {
+      Eigen::Vector3d colour;
+      for (int c = 0; c < 3; ++c) {
+        std::size_t used = 0;
+        colour[c] = std::stoi(text.substr(1 + 2 * c, 2), &used, 16) / 255.0;
+        if (used != 2) throw std::invalid_argument(text);
+      }
+      return colour;
+    } catch (const std::logic_error&) {
+    }
+  }
+  throw InvalidArgument("--backdrop must be white, grey, green, black or #rrggbb, got '" + text +
+                        "'");
+}
+
+// A Progress drawn on stderr (a bar on a terminal, lines otherwise), cancelled by Ctrl-C.
+struct CliProgress {
+  CancellationToken token;
+  InterruptScope interrupt{&token};
+  TerminalProgress bar;
+  Progress progress;
+  explicit CliProgress(std::ostream& err)
+      : bar(err, ::isatty(STDERR_FILENO) == 1 && &err == &std::cerr),
+        progress(bar.Listener(), token) {}
+};
+
+struct SimCaptureArgs {
+  SimCaptureOptions options;
+  std::string size = "5184x3456";
+  std::string backdrop;
+  std::filesystem::path out;
+  double yaw_deg = 0.0;
+  bool unlit = false;
+};
+
+int RunSimCapture(SimCaptureArgs& args, std::ostream& out, std::ostream& err) {
+  SimCaptureOptions& options = args.options;
+  ParseSize(args.size, &options.rig.width, &options.rig.height);
+  if (!args.backdrop.empty()) {
+    const Eigen::Vector3d colour = ParseColour(args.backdrop);
+    options.render.backdrop_top = colour;
+    options.render.backdrop_bottom = 0.9 * colour;
+  }
+  options.placement.yaw_rad = args.yaw_deg * 3.14159265358979323846 / 180.0;
+  options.render.lit = !args.unlit;
+  CliProgress cli(err);
+  const SimCaptureResult result = SimulateCapture(options, args.out, cli.progress);
+  out << "session " << result.session.string() << ": " << result.views << " views, " << std::fixed
+      << std::setprecision(1) << result.render_seconds << " s rendering\n";
+  return kExitOk;
+}
+
+struct ImportArgs {
+  ImportOptions options;
+  std::string format = "middlebury";
+  std::string link = "copy";
+  std::filesystem::path out;
+};
+
+int RunImport(ImportArgs& args, std::ostream& out, std::ostream& err) {
+  if (args.format == "middlebury") {
+    args.options.format = ImportOptions::Format::kMiddlebury;
+  } else if (args.format == "colmap") {
+    args.options.format = ImportOptions::Format::kColmap;
+  } else {
+    throw InvalidArgument("--format must be middlebury or colmap, got '" + args.format + "'");
+  }
+  if (args.link == "copy") {
+    args.options.transfer = ImportOptions::Transfer::kCopy;
+  } else if (args.link == "hard") {
+    args.options.transfer = ImportOptions::Transfer::kHardLink;
+  } else if (args.link == "symbolic") {
+    args.options.transfer = ImportOptions::Transfer::kSymlink;
+  } else {
+    throw InvalidArgument("--link must be copy, hard or symbolic, got '" + args.link + "'");
+  }
+  CliProgress cli(err);
+  const ImportResult result = ImportDataset(args.options, args.out, cli.progress);
+  out << "session " << result.session.string() << ": " << result.views << " views imported\n";
+  return kExitOk;
 }
 
 int RunSelfCheckCommand(const SelfCheckOptions& options, std::ostream& out, std::ostream& err) {
-  CancellationToken token;
-  InterruptScope interrupt(&token);
-  TerminalProgress bar(err, ::isatty(STDERR_FILENO) == 1 && &err == &std::cerr);
-  Progress progress(bar.Listener(), token);
-  const SelfCheckResult result = RunSelfCheck(options, progress);
+  CliProgress cli(err);
+  const SelfCheckResult result = RunSelfCheck(options, cli.progress);
   for (const SelfCheckItem& item : result.items) {
     const char* status = item.status == SelfCheckItem::Status::kPassed    ? "PASS"
                          : item.status == SelfCheckItem::Status::kSkipped ? "SKIP"
@@ -134,6 +234,77 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
       ->add_option("--points", self_check.points, "random points in the camera-model check")
       ->capture_default_str();
 
+  // carousel sim capture
+  CLI::App* sim_command =
+      app.add_subcommand("sim", "simulated rig: render capture sessions of product models");
+  sim_command->require_subcommand(1);
+  SimCaptureArgs sim_capture;
+  sim_capture.options.data_dir = DefaultDataDir();
+  CLI::App* capture = sim_command->add_subcommand(
+      "capture", "photograph a scene on the simulated turntable into a new session folder");
+  SimCaptureOptions& sc = sim_capture.options;
+  capture->add_option("--scene", sc.scene, "shoe, bottle, avocado, duck, or a .gltf/.glb/.obj file")
+      ->capture_default_str();
+  capture->add_option("--out", sim_capture.out, "session folder to create")->required();
+  capture->add_option("--views", sc.stops, "turntable stops per camera")->capture_default_str();
+  capture->add_option("--size", sim_capture.size, "image size WxH")->capture_default_str();
+  capture
+      ->add_option("--elevations", sc.rig.elevations_deg,
+                   "camera elevations in degrees, one camera each (e.g. 15,35,60)")
+      ->delimiter(',')
+      ->capture_default_str();
+  capture->add_option("--focal-mm", sc.rig.focal_length_mm, "lens focal length (APS-C sensor)")
+      ->capture_default_str();
+  capture
+      ->add_option("--distance", sc.rig.distance_m,
+                   "camera distance in metres (0: frame the object)")
+      ->capture_default_str();
+  capture->add_option("--noise", sc.render.noise_sigma, "sensor noise, 8-bit levels")
+      ->capture_default_str();
+  capture->add_option("--seed", sc.render.seed, "noise seed")->capture_default_str();
+  capture->add_option("--jpeg-quality", sc.jpeg_quality, "JPEG quality of the photos")
+      ->capture_default_str();
+  capture
+      ->add_option("--samples", sc.render.samples_per_axis,
+                   "anti-aliasing samples per pixel and axis (1..4)")
+      ->capture_default_str();
+  capture->add_option("--backdrop", sim_capture.backdrop, "white, grey, green, black or #rrggbb");
+  capture
+      ->add_option("--plate-radius", sc.render.plate_radius_m,
+                   "turntable plate radius in metres (0: no plate)")
+      ->capture_default_str();
+  capture
+      ->add_option("--target-height", sc.placement.target_height_m,
+                   "scale the model to this height in metres (0: as authored)")
+      ->capture_default_str();
+  capture->add_option("--scale", sc.placement.scale, "scale factor when no --target-height")
+      ->capture_default_str();
+  capture->add_option("--yaw-deg", sim_capture.yaw_deg, "turn the model on the plate first")
+      ->capture_default_str();
+  capture->add_flag("--unlit", sim_capture.unlit, "no lighting: render the albedo");
+  capture->add_option("--product", sc.product, "product name for the manifest");
+  capture->add_option("--data", sc.data_dir, "shared test data folder (for model names)");
+  capture->add_flag("--force", sc.overwrite, "replace an existing session folder");
+
+  // carousel import
+  ImportArgs import_args;
+  CLI::App* import_command = app.add_subcommand(
+      "import", "turn a calibrated dataset (Middlebury, COLMAP text) into a session folder");
+  import_command
+      ->add_option("source", import_args.options.source,
+                   "Middlebury *_par.txt, or a COLMAP sparse text model folder")
+      ->required();
+  import_command->add_option("--format", import_args.format, "middlebury or colmap")
+      ->capture_default_str();
+  import_command->add_option("--images", import_args.options.images_dir,
+                             "folder of the photos (default: beside the par file)");
+  import_command->add_option("--out", import_args.out, "session folder to create")->required();
+  import_command->add_option("--link", import_args.link, "copy, hard or symbolic")
+      ->capture_default_str();
+  import_command->add_option("--product", import_args.options.product, "product name");
+  import_command->add_flag("--force", import_args.options.overwrite,
+                           "replace an existing session folder");
+
   std::vector<CLI::App*> planned;
   for (const PlannedCommand& command : kPlannedCommands) {
     CLI::App* sub = app.add_subcommand(command.name, command.summary);
@@ -166,6 +337,8 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
       }
     }
     if (self_check_command->parsed()) return RunSelfCheckCommand(self_check, out, err);
+    if (capture->parsed()) return RunSimCapture(sim_capture, out, err);
+    if (import_command->parsed()) return RunImport(import_args, out, err);
     err << "carousel: no subcommand\n";
     return kExitUsage;
   } catch (const std::exception& e) {

@@ -33,6 +33,9 @@ CliResult RunCarousel(std::vector<const char*> args) {
 
 const char* const kSubcommands[] = {"sim", "import", "reconstruct", "texture",  "process",
                                     "run", "camera", "turntable",   "calibrate"};
+// Those still to come (the others are built).
+const char* const kUnbuilt[] = {"reconstruct", "texture",   "process",  "run",
+                                "camera",      "turntable", "calibrate"};
 
 TEST(CliTest, HelpListsEverySubcommand) {
   const CliResult result = RunCarousel({"--help"});
@@ -50,7 +53,7 @@ TEST(CliTest, VersionNamesTheLibraries) {
 }
 
 TEST(CliTest, UnbuiltSubcommandsSaySoAndFail) {
-  for (const char* name : kSubcommands) {
+  for (const char* name : kUnbuilt) {
     const CliResult result = RunCarousel({name, "--some-flag", "value"});
     EXPECT_EQ(result.code, kExitUnavailable) << name;
     EXPECT_THAT(result.err, HasSubstr(std::string("carousel ") + name + ": not built yet"));

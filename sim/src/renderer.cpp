@@ -1,0 +1,610 @@
+#include "carousel/sim/renderer.h"
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <numbers>
+#include <thread>
+
+#include "carousel/core/error.h"
+#include "carousel/core/mesh_primitives.h"
+
+namespace carousel::sim {
+namespace {
+
+constexpr int kTileSize = 32;
+constexpr int kMaxSubdivision = 8;
+
+// ---- colour ---------------------------------------------------------------------------------
+
+float SrgbToLinear(float c) {
+  return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
+}
+float LinearToSrgb(float c) {
+  return c <= 0.0031308f ? 12.92f * c : 1.055f * std::pow(c, 1.0f / 2.4f) - 0.055f;
+}
+
+struct ColourTables {
+  std::array<float, 256> to_linear{};
+  static constexpr int kEncodeSize = 4096;
+  std::array<float, kEncodeSize + 1> to_srgb255{};  // linear [0,1] -> sRGB 0..255 (unrounded)
+  ColourTables() {
+    for (int i = 0; i < 256; ++i) to_linear[i] = SrgbToLinear(i / 255.0f);
+    for (int i = 0; i <= kEncodeSize; ++i) {
+      to_srgb255[i] = 255.0f * LinearToSrgb(static_cast<float>(i) / kEncodeSize);
+    }
+  }
+  float Encode(float linear) const {
+    const float x = std::clamp(linear, 0.0f, 1.0f) * kEncodeSize;
+    const int i = std::min(static_cast<int>(x), kEncodeSize - 1);
+    const float f = x - i;
+    return to_srgb255[i] + f * (to_srgb255[i + 1] - to_srgb255[i]);
+  }
+};
+
+const ColourTables& Tables() {
+  static const ColourTables tables;
+  return tables;
+}
+
+// ---- deterministic noise -----------------------------------------------------------------
+
+std::uint64_t Mix(std::uint64_t x) {  // splitmix64 finaliser
+  x += 0x9e3779b97f4a7c15ULL;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
+  return x ^ (x >> 31);
+}
+
+// Approximately standard-normal: the sum of three 21-bit uniforms from one hash of
+// (seed, index), centred and scaled to unit variance (variance of the sum = 3/12).
+float HashNormal(std::uint64_t mixed_seed, std::uint64_t index) {
+  const std::uint64_t h = Mix(mixed_seed + index);
+  constexpr float kScale = 1.0f / 2097151.0f;
+  const float sum = static_cast<float>(h & 0x1fffff) * kScale +
+                    static_cast<float>((h >> 21) & 0x1fffff) * kScale +
+                    static_cast<float>((h >> 42) & 0x1fffff) * kScale;
+  return (sum - 1.5f) * 2.0f;
+}
+
+// ---- texture sampling -------------------------------------------------------------------
+
+Eigen::Vector3f Bilinear(const cv::Mat& level, float u, float v) {
+  // u, v in image convention [0,1) with repeat wrapping; texel centres at (i + 0.5) / size.
+  const float x = u * level.cols - 0.5f;
+  const float y = v * level.rows - 0.5f;
+  const float fx = std::floor(x), fy = std::floor(y);
+  const float ax = x - fx, ay = y - fy;
+  auto wrap = [](int i, int n) { return ((i % n) + n) % n; };
+  const int x0 = wrap(static_cast<int>(fx), level.cols), x1 = wrap(x0 + 1, level.cols);
+  const int y0 = wrap(static_cast<int>(fy), level.rows), y1 = wrap(y0 + 1, level.rows);
+  const auto& lin = Tables().to_linear;
+  auto texel = [&](int tx, int ty) {
+    const cv::Vec3b& p = level.at<cv::Vec3b>(ty, tx);
+    return Eigen::Vector3f(lin[p[2]], lin[p[1]], lin[p[0]]);  // RGB
+  };
+  return (1 - ay) * ((1 - ax) * texel(x0, y0) + ax * texel(x1, y0)) +
+         ay * ((1 - ax) * texel(x0, y1) + ax * texel(x1, y1));
+}
+
+Eigen::Vector3f SampleTexture(const Texture& texture, float u, float v, float lod) {
+  const auto& levels = texture.levels();
+  const int last = static_cast<int>(levels.size()) - 1;
+  lod = std::clamp(lod, 0.0f, static_cast<float>(last));
+  const int l0 = static_cast<int>(lod);
+  const float f = lod - l0;
+  const Eigen::Vector3f a = Bilinear(levels[l0], u, v);
+  if (f < 1e-3f || l0 == last) return a;
+  return (1 - f) * a + f * Bilinear(levels[l0 + 1], u, v);
+}
+
+// ---- geometry ------------------------------------------------------------------------------
+
+// A vertex on its way to the screen: camera-frame position and the attributes to interpolate.
+struct ClipVertex {
+  Eigen::Vector3d cam;        // camera frame
+  Eigen::Vector2f uv;         // image convention
+  Eigen::Vector3f normal;     // world frame
+};
+
+struct ScreenTriangle {
+  double x[3], y[3];          // pixel coordinates (distorted)
+  float inv_z[3];             // 1 / camera z
+  float u_z[3], v_z[3];       // uv / z
+  float n_z[3][3];            // normal / z
+  double area2;               // twice the signed screen area (> 0 after orientation)
+  int material;               // index into the scene's materials, or -1 for the plate
+  float lod;                  // mip level
+  bool object;                // counts for the mask and depth
+  bool flip_normal;           // back face seen: shade the other side
+};
+
+class TriangleSetup {
+ public:
+  TriangleSetup(const CameraModel& camera, const RenderOptions& options,
+                std::vector<ScreenTriangle>& out)
+      : camera_(camera), options_(options), out_(out) {}
+
+  void Add(const std::array<ClipVertex, 3>& v, int material, bool object, bool flip_normal,
+           const Texture* texture, int depth = 0) {
+    for (const ClipVertex& vertex : v) {
+      if (!(vertex.cam.z() > options_.near_m)) return;
+    }
+    std::array<Eigen::Vector2d, 3> p;
+    for (int k = 0; k < 3; ++k) p[k] = camera_.ProjectFromCam(v[k].cam);
+    // Cull what lies wholly outside the image.
+    const double min_x = std::min({p[0].x(), p[1].x(), p[2].x()});
+    const double max_x = std::max({p[0].x(), p[1].x(), p[2].x()});
+    const double min_y = std::min({p[0].y(), p[1].y(), p[2].y()});
+    const double max_y = std::max({p[0].y(), p[1].y(), p[2].y()});
+    if (max_x < -0.5 || max_y < -0.5 || min_x > camera_.width - 0.5 ||
+        min_y > camera_.height - 0.5) {
+      return;
+    }
+    if (depth < kMaxSubdivision && !camera_.distortion.IsZero() && NeedsSplit(v, p)) {
+      std::array<ClipVertex, 3> m;
+      for (int k = 0; k < 3; ++k) m[k] = Midpoint(v[k], v[(k + 1) % 3]);
+      Add({v[0], m[0], m[2]}, material, object, flip_normal, texture, depth + 1);
+      Add({m[0], v[1], m[1]}, material, object, flip_normal, texture, depth + 1);
+      Add({m[2], m[1], v[2]}, material, object, flip_normal, texture, depth + 1);
+      Add({m[0], m[1], m[2]}, material, object, flip_normal, texture, depth + 1);
+      return;
+    }
+    ScreenTriangle t{};
+    double area2 = (p[1].x() - p[0].x()) * (p[2].y() - p[0].y()) -
+                   (p[2].x() - p[0].x()) * (p[1].y() - p[0].y());
+    if (!(std::abs(area2) > 1e-12)) return;
+    std::array<int, 3> order = {0, 1, 2};
+    if (area2 < 0) {
+      std::swap(order[1], order[2]);
+      area2 = -area2;
+    }
+    for (int k = 0; k < 3; ++k) {
+      const ClipVertex& s = v[order[k]];
+      const float inv_z = static_cast<float>(1.0 / s.cam.z());
+      t.x[k] = p[order[k]].x();
+      t.y[k] = p[order[k]].y();
+      t.inv_z[k] = inv_z;
+      t.u_z[k] = s.uv.x() * inv_z;
+      t.v_z[k] = s.uv.y() * inv_z;
+      for (int c = 0; c < 3; ++c) t.n_z[k][c] = s.normal[c] * inv_z;
+    }
+    t.area2 = area2;
+    t.material = material;
+    t.object = object;
+    t.flip_normal = flip_normal;
+    t.lod = 0.0f;
+    if (texture != nullptr) {
+      const Eigen::Vector2f e1 = v[1].uv - v[0].uv, e2 = v[2].uv - v[0].uv;
+      const double uv_area2 = std::abs(static_cast<double>(e1.x()) * e2.y() -
+                                       static_cast<double>(e2.x()) * e1.y());
+      const double texels = uv_area2 * texture->width() * texture->height();
+      if (texels > 0) t.lod = static_cast<float>(0.5 * std::log2(texels / area2));
+    }
+    out_.push_back(t);
+  }
+
+ private:
+  static ClipVertex Midpoint(const ClipVertex& a, const ClipVertex& b) {
+    return {0.5 * (a.cam + b.cam), 0.5f * (a.uv + b.uv), (0.5f * (a.normal + b.normal))};
+  }
+
+  // True when the lens bends an edge further than allowed from its straight image.
+  bool NeedsSplit(const std::array<ClipVertex, 3>& v,
+                  const std::array<Eigen::Vector2d, 3>& p) const {
+    for (int k = 0; k < 3; ++k) {
+      const Eigen::Vector2d a = p[k], b = p[(k + 1) % 3];
+      const Eigen::Vector3d mid3 = 0.5 * (v[k].cam + v[(k + 1) % 3].cam);
+      const Eigen::Vector2d mid = camera_.ProjectFromCam(mid3);
+      const Eigen::Vector2d ab = b - a;
+      const double length = ab.norm();
+      if (length < 1e-9) continue;
+      const double distance = std::abs(ab.x() * (mid.y() - a.y()) - ab.y() * (mid.x() - a.x())) /
+                              length;
+      if (distance > options_.max_edge_error_px) return true;
+    }
+    return false;
+  }
+
+  const CameraModel& camera_;
+  const RenderOptions& options_;
+  std::vector<ScreenTriangle>& out_;
+};
+
+// ---- rasterisation -------------------------------------------------------------------------
+
+// Is the edge (a -> b) a top or left edge? Triangles are ordered so that
+// cross(v1 - v0, v2 - v0) > 0, which in image coordinates (y down) runs clockwise on screen:
+// the top edge runs to the right, left edges run upwards. Samples exactly on such edges
+// belong to the triangle, so shared edges are covered exactly once.
+bool TopLeft(double ax, double ay, double bx, double by) {
+  const double dx = bx - ax, dy = by - ay;
+  return (dy == 0 && dx > 0) || dy < 0;
+}
+
+struct Sample {
+  float inv_z;
+  int triangle;
+};
+
+class Rasteriser {
+ public:
+  Rasteriser(const Scene& scene, const CameraModel& camera, const RenderOptions& options,
+             const std::vector<ScreenTriangle>& triangles,
+             const std::vector<std::vector<std::uint32_t>>& bins, int tiles_x,
+             const std::vector<Eigen::Vector3f>& lights_world, RenderResult& result)
+      : scene_(scene),
+        camera_(camera),
+        options_(options),
+        triangles_(triangles),
+        bins_(bins),
+        tiles_x_(tiles_x),
+        lights_world_(lights_world),
+        result_(result),
+        n_(options.samples_per_axis),
+        samples_(n_ * n_) {
+    for (int j = 0; j < n_; ++j) {
+      for (int i = 0; i < n_; ++i) {
+        offsets_.emplace_back((i + 0.5) / n_ - 0.5, (j + 0.5) / n_ - 0.5);
+      }
+    }
+    const auto& lin = Tables().to_linear;
+    auto linear = [&](const Eigen::Vector3d& srgb) {
+      Eigen::Vector3f out;
+      for (int c = 0; c < 3; ++c) {
+        out[c] = lin[static_cast<int>(std::lround(std::clamp(srgb[c], 0.0, 1.0) * 255))];
+      }
+      return out;
+    };
+    plate_ = linear(options.plate_color);
+    // The backdrop is a vertical gradient: one colour per image row.
+    const Eigen::Vector3f top = linear(options.backdrop_top);
+    const Eigen::Vector3f bottom = linear(options.backdrop_bottom);
+    backdrop_rows_.resize(camera.height);
+    for (int y = 0; y < camera.height; ++y) {
+      const float fy = camera.height > 1 ? static_cast<float>(y) / (camera.height - 1) : 0.0f;
+      backdrop_rows_[y] = (1 - fy) * top + fy * bottom;
+    }
+    mixed_seed_ = Mix(options.seed);
+  }
+
+  // Renders one tile; `buffer` is the calling worker's scratch space.
+  void RenderTile(int tile, std::vector<Sample>& buffer) {
+    const int tx = tile % tiles_x_, ty = tile / tiles_x_;
+    const int x0 = tx * kTileSize, y0 = ty * kTileSize;
+    const int x1 = std::min(x0 + kTileSize, camera_.width);
+    const int y1 = std::min(y0 + kTileSize, camera_.height);
+    const int w = x1 - x0;
+    if (bins_[tile].empty()) {
+      FillBackdrop(x0, y0, x1, y1);
+      return;
+    }
+    buffer.assign(static_cast<std::size_t>(w) * (y1 - y0) * samples_, Sample{0.0f, -1});
+    for (std::uint32_t index : bins_[tile]) {
+      RasteriseTriangle(index, x0, y0, x1, y1, w, buffer);
+    }
+    Resolve(x0, y0, x1, y1, w, buffer);
+  }
+
+ private:
+  void RasteriseTriangle(std::uint32_t index, int x0, int y0, int x1, int y1, int w,
+                         std::vector<Sample>& buffer) const {
+    const ScreenTriangle& t = triangles_[index];
+    const int bx0 = std::max(x0, static_cast<int>(std::floor(std::min({t.x[0], t.x[1], t.x[2]}))));
+    const int bx1 =
+        std::min(x1 - 1, static_cast<int>(std::ceil(std::max({t.x[0], t.x[1], t.x[2]}))));
+    const int by0 = std::max(y0, static_cast<int>(std::floor(std::min({t.y[0], t.y[1], t.y[2]}))));
+    const int by1 =
+        std::min(y1 - 1, static_cast<int>(std::ceil(std::max({t.y[0], t.y[1], t.y[2]}))));
+    if (bx0 > bx1 || by0 > by1) return;
+    // Edge k is opposite vertex k, from vertex a = k+1 to b = k+2:
+    // E_k(p) = cross(b - a, p - a) = ex * px + ey * py + ec, positive inside, and
+    // E_k / area2 is the screen-space barycentric of vertex k.
+    double ex[3], ey[3], ec[3];
+    bool top_left[3];
+    for (int k = 0; k < 3; ++k) {
+      const int a = (k + 1) % 3, b = (k + 2) % 3;
+      ex[k] = -(t.y[b] - t.y[a]);
+      ey[k] = t.x[b] - t.x[a];
+      ec[k] = -(t.x[a] * ex[k] + t.y[a] * ey[k]);
+      top_left[k] = TopLeft(t.x[a], t.y[a], t.x[b], t.y[b]);
+    }
+    const double inv_area = 1.0 / t.area2;
+    for (int y = by0; y <= by1; ++y) {
+      for (int x = bx0; x <= bx1; ++x) {
+        Sample* pixel = &buffer[(static_cast<std::size_t>(y - y0) * w + (x - x0)) * samples_];
+        for (int s = 0; s < samples_; ++s) {
+          const double px = x + offsets_[s].x(), py = y + offsets_[s].y();
+          double e[3];
+          bool inside = true;
+          for (int k = 0; k < 3 && inside; ++k) {
+            e[k] = ex[k] * px + ey[k] * py + ec[k];
+            inside = e[k] > 0 || (e[k] == 0 && top_left[k]);
+          }
+          if (!inside) continue;
+          const float inv_z = static_cast<float>(
+              (e[0] * t.inv_z[0] + e[1] * t.inv_z[1] + e[2] * t.inv_z[2]) * inv_area);
+          if (inv_z > pixel[s].inv_z) pixel[s] = {inv_z, static_cast<int>(index)};
+        }
+      }
+    }
+  }
+
+  // Perspective-correct barycentrics of triangle t at (px, py).
+  std::array<float, 3> Barycentric(const ScreenTriangle& t, double px, double py) const {
+    double e[3];
+    for (int k = 0; k < 3; ++k) {
+      const int a = (k + 1) % 3, b = (k + 2) % 3;
+      e[k] = (t.x[b] - t.x[a]) * (py - t.y[a]) - (t.y[b] - t.y[a]) * (px - t.x[a]);
+    }
+    const double total = e[0] + e[1] + e[2];
+    std::array<float, 3> b{};
+    if (std::abs(total) < 1e-300) return {1.0f / 3, 1.0f / 3, 1.0f / 3};
+    double w[3], sum = 0;
+    for (int k = 0; k < 3; ++k) {
+      w[k] = std::clamp(e[k] / total, 0.0, 1.0) * t.inv_z[k];
+      sum += w[k];
+    }
+    for (int k = 0; k < 3; ++k) b[k] = static_cast<float>(w[k] / sum);
+    return b;
+  }
+
+  Eigen::Vector3f Shade(const ScreenTriangle& t, double px, double py, float* depth) const {
+    const std::array<float, 3> b = Barycentric(t, px, py);
+    // b are perspective-correct: attributes linear in 3D (uv, normal, z) combine with them.
+    float z_interpolated = 0, u = 0, v = 0;
+    Eigen::Vector3f n = Eigen::Vector3f::Zero();
+    for (int k = 0; k < 3; ++k) {
+      const float z = 1.0f / t.inv_z[k];
+      u += b[k] * t.u_z[k] * z;
+      v += b[k] * t.v_z[k] * z;
+      for (int c = 0; c < 3; ++c) n[c] += b[k] * t.n_z[k][c] * z;
+      z_interpolated += b[k] * z;
+    }
+    *depth = z_interpolated;
+    Eigen::Vector3f albedo;
+    if (t.material < 0) {
+      albedo = plate_;
+    } else {
+      const Material& material = scene_.materials[t.material];
+      albedo = material.base_color;
+      if (material.texture >= 0) {
+        albedo = albedo.cwiseProduct(
+            SampleTexture(*scene_.textures[material.texture], u - std::floor(u),
+                          v - std::floor(v), t.lod));
+      }
+    }
+    const float exposure = static_cast<float>(options_.exposure);
+    if (!options_.lit) return albedo * exposure;
+    const float length = n.norm();
+    n = length > 0 ? Eigen::Vector3f(n / length) : Eigen::Vector3f::UnitZ();
+    if (t.flip_normal) n = -n;
+    float light = static_cast<float>(options_.ambient);
+    for (std::size_t i = 0; i < lights_world_.size(); ++i) {
+      const float wrap = static_cast<float>(options_.lights[i].wrap);
+      const float d = (n.dot(lights_world_[i]) + wrap) / (1.0f + wrap);
+      light += static_cast<float>(options_.lights[i].intensity) * std::max(d, 0.0f);
+    }
+    return albedo * (light * exposure);
+  }
+
+  // Writes a pixel's final colour (linear RGB) with sensor noise, as 8-bit BGR.
+  void WritePixel(int x, int y, const Eigen::Vector3f& colour, cv::Vec3b& out) const {
+    const ColourTables& tables = Tables();
+    for (int c = 0; c < 3; ++c) {
+      float value = tables.Encode(colour[c]);
+      if (options_.noise_sigma > 0) {
+        const std::uint64_t index = (static_cast<std::uint64_t>(y) * camera_.width + x) * 3 + c;
+        value += static_cast<float>(options_.noise_sigma) * HashNormal(mixed_seed_, index);
+      }
+      out[2 - c] = static_cast<std::uint8_t>(std::clamp(value, 0.0f, 255.0f) + 0.5f);
+    }
+  }
+
+  void FillBackdrop(int x0, int y0, int x1, int y1) const {
+    for (int y = y0; y < y1; ++y) {
+      auto* image_row = result_.image.ptr<cv::Vec3b>(y);
+      for (int x = x0; x < x1; ++x) WritePixel(x, y, backdrop_rows_[y], image_row[x]);
+      std::fill(result_.mask.ptr<std::uint8_t>(y) + x0, result_.mask.ptr<std::uint8_t>(y) + x1, 0);
+      std::fill(result_.depth.ptr<float>(y) + x0, result_.depth.ptr<float>(y) + x1, 0.0f);
+    }
+  }
+
+  void Resolve(int x0, int y0, int x1, int y1, int w, const std::vector<Sample>& buffer) const {
+    for (int y = y0; y < y1; ++y) {
+      const Eigen::Vector3f& backdrop = backdrop_rows_[y];
+      auto* image_row = result_.image.ptr<cv::Vec3b>(y);
+      auto* mask_row = result_.mask.ptr<std::uint8_t>(y);
+      auto* depth_row = result_.depth.ptr<float>(y);
+      for (int x = x0; x < x1; ++x) {
+        const Sample* pixel = &buffer[(static_cast<std::size_t>(y - y0) * w + (x - x0)) * samples_];
+        // Fast path: one triangle (or the backdrop) covers every sample.
+        bool uniform = true;
+        for (int s = 1; s < samples_ && uniform; ++s) uniform = pixel[s].triangle == pixel[0].triangle;
+        if (uniform) {
+          const int id = pixel[0].triangle;
+          if (id < 0) {
+            WritePixel(x, y, backdrop, image_row[x]);
+            mask_row[x] = 0;
+            depth_row[x] = 0.0f;
+          } else {
+            float depth = 0.0f;
+            WritePixel(x, y, Shade(triangles_[id], x, y, &depth), image_row[x]);
+            mask_row[x] = triangles_[id].object ? 255 : 0;
+            depth_row[x] = triangles_[id].object ? depth : 0.0f;
+          }
+          continue;
+        }
+        Eigen::Vector3f colour = Eigen::Vector3f::Zero();
+        int object_samples = 0;
+        float nearest_object = 0.0f;
+        std::array<bool, 16> done{};
+        for (int s = 0; s < samples_; ++s) {
+          if (done[s]) continue;
+          const int id = pixel[s].triangle;
+          int count = 0;
+          double cx = 0, cy = 0;
+          for (int r = s; r < samples_; ++r) {
+            if (pixel[r].triangle == id) {
+              done[r] = true;
+              ++count;
+              cx += offsets_[r].x();
+              cy += offsets_[r].y();
+            }
+          }
+          const float weight = static_cast<float>(count) / samples_;
+          if (id < 0) {
+            colour += weight * backdrop;
+            continue;
+          }
+          const ScreenTriangle& t = triangles_[id];
+          float depth = 0.0f;
+          colour += weight * Shade(t, x + cx / count, y + cy / count, &depth);
+          if (t.object) {
+            object_samples += count;
+            if (nearest_object == 0.0f || depth < nearest_object) nearest_object = depth;
+          }
+        }
+        WritePixel(x, y, colour, image_row[x]);
+        const bool object = 2 * object_samples >= samples_;
+        mask_row[x] = object ? 255 : 0;
+        depth_row[x] = object ? nearest_object : 0.0f;
+      }
+    }
+  }
+
+  const Scene& scene_;
+  const CameraModel& camera_;
+  const RenderOptions& options_;
+  const std::vector<ScreenTriangle>& triangles_;
+  const std::vector<std::vector<std::uint32_t>>& bins_;
+  int tiles_x_;
+  const std::vector<Eigen::Vector3f>& lights_world_;
+  RenderResult& result_;
+  int n_;
+  int samples_;
+  std::vector<Eigen::Vector2d> offsets_;
+  std::vector<Eigen::Vector3f> backdrop_rows_;  // linear RGB per image row
+  Eigen::Vector3f plate_;
+  std::uint64_t mixed_seed_ = 0;
+};
+
+}  // namespace
+
+void RenderOptions::Validate() const {
+  CAROUSEL_THROW_IF(samples_per_axis < 1 || samples_per_axis > 4, InvalidArgument,
+                    "RenderOptions.samples_per_axis must be in 1..4, got " << samples_per_axis);
+  CAROUSEL_THROW_IF(!(ambient >= 0), InvalidArgument, "RenderOptions.ambient must be >= 0");
+  CAROUSEL_THROW_IF(!(exposure > 0 && exposure < 1e3), InvalidArgument,
+                    "RenderOptions.exposure must be in (0, 1000), got " << exposure);
+  for (const DirectionalLight& light : lights) {
+    CAROUSEL_THROW_IF(!(light.intensity >= 0) || !(light.wrap >= 0 && light.wrap <= 1) ||
+                          !(light.direction_studio.norm() > 0),
+                      InvalidArgument,
+                      "RenderOptions.lights: intensity >= 0, wrap in 0..1 and a non-zero "
+                      "direction are required");
+  }
+  CAROUSEL_THROW_IF(!(plate_radius_m >= 0), InvalidArgument,
+                    "RenderOptions.plate_radius_m must be >= 0");
+  CAROUSEL_THROW_IF(!(noise_sigma >= 0 && noise_sigma <= 64), InvalidArgument,
+                    "RenderOptions.noise_sigma must be in 0..64, got " << noise_sigma);
+  CAROUSEL_THROW_IF(!(max_edge_error_px > 0), InvalidArgument,
+                    "RenderOptions.max_edge_error_px must be > 0");
+  CAROUSEL_THROW_IF(threads < 0, InvalidArgument, "RenderOptions.threads must be >= 0");
+  CAROUSEL_THROW_IF(!(near_m > 0), InvalidArgument, "RenderOptions.near_m must be > 0");
+}
+
+RenderResult Render(const Scene& scene, const CameraModel& camera, double table_angle_rad,
+                    const RenderOptions& options) {
+  options.Validate();
+  camera.Validate();
+  scene.Validate();
+
+  // Camera-space setup of every triangle (object, then plate).
+  std::vector<ScreenTriangle> triangles;
+  triangles.reserve(scene.triangles.size() + 256);
+  TriangleSetup setup(camera, options, triangles);
+  const Eigen::Vector3d eye = camera.Centre();
+  for (std::size_t i = 0; i < scene.triangles.size(); ++i) {
+    const Eigen::Vector3i& tri = scene.triangles[i];
+    std::array<ClipVertex, 3> v;
+    for (int k = 0; k < 3; ++k) {
+      v[k] = {camera.cam_from_world * scene.positions[tri[k]], scene.uvs[tri[k]],
+              scene.normals[tri[k]]};
+    }
+    const Eigen::Vector3d& p0 = scene.positions[tri[0]];
+    const Eigen::Vector3d face_normal =
+        (scene.positions[tri[1]] - p0).cross(scene.positions[tri[2]] - p0);
+    const bool back_facing = face_normal.dot(eye - p0) < 0;
+    const int material = scene.triangle_material[i];
+    const int texture = scene.materials[material].texture;
+    setup.Add(v, material, true, back_facing,
+              texture >= 0 ? scene.textures[texture].get() : nullptr);
+  }
+  if (options.plate_radius_m > 0) {
+    // Rings of compact triangles (a fan of slivers would give every triangle a huge bounding
+    // box), just below the object's base so that the two never fight over depth.
+    const Mesh plate = MakeDisc(options.plate_radius_m, 128, 16);
+    const double z = -0.001;
+    const Eigen::Vector3f up = Eigen::Vector3f::UnitZ();
+    for (Mesh::FaceHandle face : plate.faces()) {
+      std::array<ClipVertex, 3> v;
+      int k = 0;
+      for (Mesh::VertexHandle vertex : plate.fv_range(face)) {
+        const OpenMesh::Vec3d& p = plate.point(vertex);
+        v[k++] = {camera.cam_from_world * Eigen::Vector3d(p[0], p[1], z), {0, 0}, up};
+      }
+      setup.Add(v, -1, false, eye.z() < z, nullptr);
+    }
+  }
+
+  // Bin triangles to tiles, in order (determinism).
+  const int tiles_x = (camera.width + kTileSize - 1) / kTileSize;
+  const int tiles_y = (camera.height + kTileSize - 1) / kTileSize;
+  std::vector<std::vector<std::uint32_t>> bins(static_cast<std::size_t>(tiles_x) * tiles_y);
+  for (std::size_t i = 0; i < triangles.size(); ++i) {
+    const ScreenTriangle& t = triangles[i];
+    const double min_x = std::min({t.x[0], t.x[1], t.x[2]}) - 1;
+    const double max_x = std::max({t.x[0], t.x[1], t.x[2]}) + 1;
+    const double min_y = std::min({t.y[0], t.y[1], t.y[2]}) - 1;
+    const double max_y = std::max({t.y[0], t.y[1], t.y[2]}) + 1;
+    const int tx0 = std::clamp(static_cast<int>(std::floor(min_x / kTileSize)), 0, tiles_x - 1);
+    const int tx1 = std::clamp(static_cast<int>(std::floor(max_x / kTileSize)), 0, tiles_x - 1);
+    const int ty0 = std::clamp(static_cast<int>(std::floor(min_y / kTileSize)), 0, tiles_y - 1);
+    const int ty1 = std::clamp(static_cast<int>(std::floor(max_y / kTileSize)), 0, tiles_y - 1);
+    for (int ty = ty0; ty <= ty1; ++ty) {
+      for (int tx = tx0; tx <= tx1; ++tx) bins[ty * tiles_x + tx].push_back(static_cast<std::uint32_t>(i));
+    }
+  }
+
+  // Lights: fixed in the studio; the scene turned by +angle, so in its frame they turned back.
+  const Eigen::Matrix3d world_from_studio = Rigid3d::RotationZ(-table_angle_rad).rotation;
+  std::vector<Eigen::Vector3f> lights_world;
+  for (const DirectionalLight& light : options.lights) {
+    lights_world.push_back((world_from_studio * light.direction_studio.normalized()).cast<float>());
+  }
+
+  RenderResult result;
+  result.image.create(camera.height, camera.width, CV_8UC3);
+  result.mask.create(camera.height, camera.width, CV_8UC1);
+  result.depth.create(camera.height, camera.width, CV_32FC1);
+  result.triangles_rasterized = triangles.size();
+  Rasteriser rasteriser(scene, camera, options, triangles, bins, tiles_x, lights_world, result);
+  const int tile_count = tiles_x * tiles_y;
+  std::atomic<int> next{0};
+  auto worker = [&] {
+    std::vector<Sample> buffer;
+    for (int tile = next++; tile < tile_count; tile = next++) rasteriser.RenderTile(tile, buffer);
+  };
+  int threads = options.threads > 0 ? options.threads
+                                    : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  threads = std::min(threads, tile_count);
+  std::vector<std::thread> pool;
+  for (int i = 1; i < threads; ++i) pool.emplace_back(worker);
+  worker();
+  for (std::thread& thread : pool) thread.join();
+  return result;
+}
+
+}  // namespace carousel::sim

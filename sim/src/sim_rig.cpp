@@ -1,0 +1,332 @@
+#include "carousel/sim/sim_rig.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <thread>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "carousel/core/error.h"
+#include "carousel/core/file_util.h"
+
+namespace carousel::sim {
+namespace {
+
+constexpr double kDegToRad = std::numbers::pi / 180.0;
+
+// Parses "1/125", "0.5", "2" (seconds).
+double ParseShutter(const std::string& value) {
+  const std::size_t slash = value.find('/');
+  std::size_t used = 0;
+  if (slash != std::string::npos) {
+    const double num = std::stod(value.substr(0, slash), &used);
+    const double den = std::stod(value.substr(slash + 1));
+    if (den <= 0) throw std::invalid_argument("zero denominator");
+    return num / den;
+  }
+  const double seconds = std::stod(value, &used);
+  if (used != value.size()) throw std::invalid_argument("trailing text");
+  return seconds;
+}
+
+double ParseAperture(const std::string& value) {
+  const std::string number = value.rfind("f/", 0) == 0 ? value.substr(2) : value;
+  std::size_t used = 0;
+  const double f = std::stod(number, &used);
+  if (used != number.size()) throw std::invalid_argument("trailing text");
+  return f;
+}
+
+}  // namespace
+
+void SimRigOptions::Validate() const {
+  CAROUSEL_THROW_IF(elevations_deg.empty(), InvalidArgument,
+                    "SimRigOptions.elevations_deg needs at least one camera");
+  for (double elevation : elevations_deg) {
+    CAROUSEL_THROW_IF(!(elevation >= -10 && elevation <= 85), InvalidArgument,
+                      "SimRigOptions.elevations_deg: " << elevation << " is outside -10..85");
+  }
+  CAROUSEL_THROW_IF(width < 16 || height < 16 || width > 20000 || height > 20000,
+                    InvalidArgument,
+                    "SimRigOptions image size " << width << "x" << height << " is out of range");
+  CAROUSEL_THROW_IF(!(sensor_width_mm > 0) || !(focal_length_mm > 0), InvalidArgument,
+                    "SimRigOptions.sensor_width_mm and focal_length_mm must be > 0");
+  CAROUSEL_THROW_IF(!(distance_m >= 0), InvalidArgument, "SimRigOptions.distance_m must be >= 0");
+  CAROUSEL_THROW_IF(!(fill > 0 && fill <= 1), InvalidArgument,
+                    "SimRigOptions.fill must be in (0, 1], got " << fill);
+}
+
+std::vector<CameraModel> MakeSimRig(const SimRigOptions& options,
+                                    const Eigen::AlignedBox3d& object_bounds) {
+  options.Validate();
+  CAROUSEL_THROW_IF(object_bounds.isEmpty(), InvalidArgument, "MakeSimRig: empty object");
+  const double fx = options.focal_length_mm / options.sensor_width_mm * options.width;
+  const Eigen::Vector3d target = object_bounds.center();
+  const double radius = 0.5 * object_bounds.sizes().norm();
+  double distance = options.distance_m;
+  if (distance <= 0) {
+    // The sphere's angular radius asin(r / d) spans `fill` of the half-size of the shorter side.
+    const double half_fov = std::atan(0.5 * std::min(options.width, options.height) / fx);
+    distance = radius / std::sin(options.fill * half_fov);
+  }
+  std::vector<CameraModel> cameras;
+  for (double elevation_deg : options.elevations_deg) {
+    const double e = elevation_deg * kDegToRad;
+    CameraModel camera;
+    camera.width = options.width;
+    camera.height = options.height;
+    camera.fx = camera.fy = fx;
+    camera.cx = 0.5 * (options.width - 1);
+    camera.cy = 0.5 * (options.height - 1);
+    camera.distortion = options.distortion;
+    const Eigen::Vector3d eye =
+        target + distance * Eigen::Vector3d(0.0, -std::cos(e), std::sin(e));
+    camera.cam_from_world = Rigid3d::LookAt(eye, target);
+    camera.Validate();
+    cameras.push_back(camera);
+  }
+  return cameras;
+}
+
+CameraModel CameraAtTableAngle(const CameraModel& at_zero, double table_angle_rad) {
+  CameraModel camera = at_zero;
+  camera.cam_from_world = at_zero.cam_from_world * Rigid3d::RotationZ(table_angle_rad);
+  return camera;
+}
+
+// ---- SimTurntable ---------------------------------------------------------------------------
+
+void SimTurntableOptions::Validate() const {
+  CAROUSEL_THROW_IF(!(max_speed_deg_s > 0) || !(acceleration_deg_s2 > 0), InvalidArgument,
+                    "SimTurntableOptions: speed and acceleration must be > 0");
+  CAROUSEL_THROW_IF(!(time_scale >= 0), InvalidArgument,
+                    "SimTurntableOptions.time_scale must be >= 0");
+}
+
+SimTurntable::SimTurntable(SimTurntableOptions options) : options_(options) {
+  options_.Validate();
+  start_time_ = std::chrono::steady_clock::now();
+}
+
+rig::TurntableInfo SimTurntable::Identify() {
+  return {"Carousel simulated turntable", "sim-1", "sim:turntable"};
+}
+
+double SimTurntable::MoveSeconds(double distance_rad) const {
+  // Trapezoidal profile; triangular when the top speed is never reached.
+  const double d = std::abs(distance_rad) / kDegToRad;
+  const double v = options_.max_speed_deg_s, a = options_.acceleration_deg_s2;
+  const double ramp = v * v / a;  // distance spent accelerating plus decelerating
+  return d >= ramp ? d / v + v / a : 2.0 * std::sqrt(d / a);
+}
+
+double SimTurntable::AngleAt(std::chrono::steady_clock::time_point now) const {
+  if (duration_s_ <= 0 || options_.time_scale <= 0) return target_rad_;
+  const double t = std::chrono::duration<double>(now - start_time_).count() / options_.time_scale;
+  const double total = duration_s_ / options_.time_scale;  // simulated seconds
+  if (t >= total) return target_rad_;
+  // Distance covered along the trapezoidal (or triangular) speed profile.
+  const double d = std::abs(target_rad_ - start_rad_);
+  const double a = options_.acceleration_deg_s2 * kDegToRad;
+  const double v = std::min(options_.max_speed_deg_s * kDegToRad, std::sqrt(d * a));
+  const double ramp = v / a;
+  double s = 0;
+  if (t < ramp) {
+    s = 0.5 * a * t * t;
+  } else if (t < total - ramp) {
+    s = 0.5 * a * ramp * ramp + v * (t - ramp);
+  } else {
+    s = d - 0.5 * a * (total - t) * (total - t);
+  }
+  s = std::clamp(s, 0.0, d);
+  return start_rad_ + (target_rad_ >= start_rad_ ? s : -s);
+}
+
+void SimTurntable::Home(std::chrono::milliseconds timeout) {
+  StartMoveTo(0.0);
+  WaitUntilStopped(timeout);
+  std::lock_guard<std::mutex> lock(mutex_);
+  homed_ = true;
+}
+
+void SimTurntable::StartMoveTo(double angle_rad) {
+  CAROUSEL_THROW_IF(!std::isfinite(angle_rad), InvalidArgument,
+                    "SimTurntable: target angle is not finite");
+  std::lock_guard<std::mutex> lock(mutex_);
+  const auto now = std::chrono::steady_clock::now();
+  start_rad_ = AngleAt(now);
+  target_rad_ = angle_rad;
+  start_time_ = now;
+  duration_s_ = MoveSeconds(target_rad_ - start_rad_) * options_.time_scale;
+}
+
+void SimTurntable::WaitUntilStopped(std::chrono::milliseconds timeout) {
+  std::chrono::steady_clock::time_point end;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    end = start_time_ + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                            std::chrono::duration<double>(duration_s_));
+  }
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  if (end > deadline) {
+    std::this_thread::sleep_until(deadline);
+    throw DeviceError("sim:turntable", "move did not finish within " +
+                                           std::to_string(timeout.count()) + " ms");
+  }
+  std::this_thread::sleep_until(end);
+}
+
+rig::TurntableStatus SimTurntable::Status() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const auto now = std::chrono::steady_clock::now();
+  rig::TurntableStatus status;
+  status.angle_rad = AngleAt(now);
+  status.target_rad = target_rad_;
+  status.moving = status.angle_rad != target_rad_;
+  status.homed = homed_;
+  return status;
+}
+
+void SimTurntable::Stop(bool emergency) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const auto now = std::chrono::steady_clock::now();
+  const double here = AngleAt(now);
+  if (emergency || duration_s_ <= 0) {
+    start_rad_ = target_rad_ = here;
+    duration_s_ = 0;
+    return;
+  }
+  // Decelerate: stop after the braking distance at the current direction of travel.
+  const double direction = target_rad_ >= start_rad_ ? 1.0 : -1.0;
+  const double v = options_.max_speed_deg_s * kDegToRad;
+  const double braking = 0.5 * v * v / (options_.acceleration_deg_s2 * kDegToRad);
+  const double remaining = std::abs(target_rad_ - here);
+  start_rad_ = here;
+  target_rad_ = here + direction * std::min(braking, remaining);
+  start_time_ = now;
+  duration_s_ = MoveSeconds(target_rad_ - start_rad_) * options_.time_scale;
+}
+
+// ---- SimCamera ------------------------------------------------------------------------------
+
+void SimCameraOptions::Validate() const {
+  CAROUSEL_THROW_IF(jpeg_quality < 1 || jpeg_quality > 100, InvalidArgument,
+                    "SimCameraOptions.jpeg_quality must be in 1..100");
+  render.Validate();
+}
+
+SimCamera::SimCamera(std::shared_ptr<const Scene> scene, CameraModel cam_from_studio,
+                     std::shared_ptr<SimTurntable> turntable, SimCameraOptions options)
+    : scene_(std::move(scene)),
+      cam_from_studio_(std::move(cam_from_studio)),
+      turntable_(std::move(turntable)),
+      options_(std::move(options)) {
+  CAROUSEL_THROW_IF(!scene_ || !turntable_, InvalidArgument,
+                    "SimCamera needs a scene and a turntable");
+  cam_from_studio_.Validate();
+  options_.Validate();
+  settings_ = {{rig::kSettingIso, "100"},          {rig::kSettingAperture, "f/8"},
+               {rig::kSettingShutterSpeed, "1/125"}, {rig::kSettingWhiteBalance, "daylight"},
+               {rig::kSettingImageFormat, "jpeg"},   {rig::kSettingCaptureTarget, "card"}};
+}
+
+rig::CameraInfo SimCamera::Identify() {
+  return {"Carousel", "Simulated DSLR", options_.serial, "sim:" + options_.serial, "simulated"};
+}
+
+std::map<std::string, std::string> SimCamera::Settings(std::chrono::milliseconds) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return settings_;
+}
+
+void SimCamera::SetSetting(const std::string& name, const std::string& value,
+                           std::chrono::milliseconds) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto it = settings_.find(name);
+  CAROUSEL_THROW_IF(it == settings_.end(), InvalidArgument,
+                    "camera " << options_.serial << ": unknown setting '" << name << "'");
+  try {
+    if (name == rig::kSettingIso) {
+      std::size_t used = 0;
+      const int iso = std::stoi(value, &used);
+      if (used != value.size() || iso < 50 || iso > 102400) throw std::invalid_argument("iso");
+    } else if (name == rig::kSettingAperture) {
+      const double f = ParseAperture(value);
+      if (!(f >= 1.0 && f <= 64.0)) throw std::invalid_argument("aperture");
+    } else if (name == rig::kSettingShutterSpeed) {
+      const double t = ParseShutter(value);
+      if (!(t > 0 && t <= 30)) throw std::invalid_argument("shutter");
+    } else if (name == rig::kSettingImageFormat && value != "jpeg") {
+      throw std::invalid_argument("format");
+    } else if (name == rig::kSettingCaptureTarget && value != "card" && value != "ram") {
+      throw std::invalid_argument("target");
+    }
+  } catch (const std::logic_error&) {
+    throw InvalidArgument("camera " + options_.serial + ": '" + value +
+                          "' is not a valid value for " + name);
+  }
+  it->second = value;
+}
+
+double SimCamera::ExposureGain() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const double iso = std::stod(settings_.at(rig::kSettingIso));
+  const double f = ParseAperture(settings_.at(rig::kSettingAperture));
+  const double t = ParseShutter(settings_.at(rig::kSettingShutterSpeed));
+  return (iso / 100.0) * (t * 125.0) * (64.0 / (f * f));
+}
+
+rig::CapturedPhoto SimCamera::Capture(std::chrono::milliseconds) {
+  const auto triggered = std::chrono::steady_clock::now();
+  const double angle = turntable_->Status().angle_rad;
+  RenderOptions render = options_.render;
+  render.exposure = std::clamp(ExposureGain(), 1e-3, 999.0);
+  std::string path;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    render.seed = options_.render.seed ^ (0x51ed27ULL * static_cast<std::uint64_t>(next_photo_));
+    path = "/store_00010001/DCIM/100SIMCA/IMG_" + std::to_string(10000 + next_photo_).substr(1) +
+           ".JPG";
+    ++next_photo_;
+  }
+  const RenderResult result =
+      Render(*scene_, CameraAtTableAngle(cam_from_studio_, angle), angle, render);
+  std::vector<std::uint8_t> jpeg;
+  cv::imencode(".jpg", result.image, jpeg, {cv::IMWRITE_JPEG_QUALITY, options_.jpeg_quality});
+  std::lock_guard<std::mutex> lock(mutex_);
+  const std::uint64_t size = jpeg.size();
+  card_[path] = std::move(jpeg);
+  return {path, size, triggered};
+}
+
+void SimCamera::Download(const rig::CapturedPhoto& photo, const std::filesystem::path& destination,
+                         bool delete_from_camera, std::chrono::milliseconds) {
+  std::vector<std::uint8_t> bytes;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    auto it = card_.find(photo.camera_path);
+    if (it == card_.end()) {
+      throw DeviceError("sim:" + options_.serial, "no photo " + photo.camera_path + " on the card");
+    }
+    bytes = it->second;
+  }
+  // Deleted from the card only once it is safely on disk.
+  WriteFileAtomic(destination, bytes, {.overwrite = false});
+  if (delete_from_camera) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    card_.erase(photo.camera_path);
+  }
+}
+
+cv::Mat SimCamera::PreviewFrame(std::chrono::milliseconds) {
+  const double angle = turntable_->Status().angle_rad;
+  const double factor = 640.0 / cam_from_studio_.width;
+  RenderOptions render = options_.render;
+  render.samples_per_axis = 1;
+  render.exposure = std::clamp(ExposureGain(), 1e-3, 999.0);
+  return Render(*scene_, CameraAtTableAngle(cam_from_studio_.Scaled(factor), angle), angle, render)
+      .image;
+}
+
+}  // namespace carousel::sim

@@ -1,0 +1,96 @@
+// The session folder (DESIGN.md) and its manifest, session.json.
+//
+//   <session>/session.json   this manifest, rewritten atomically (write, fsync, rename)
+//   <session>/images/        photos, never rewritten
+//   <session>/masks/ recon/ model/   later stages
+//   <session>/ground_truth/  simulated sessions only: exact masks, depth and scene mesh, kept
+//                            apart from what the pipeline reads
+//
+// Every path in the manifest is relative to the session folder. Each view carries the exact
+// camera used: intrinsics, distortion, image size and cam_from_world, plus the table angle.
+// World frame: the turntable frame ("turntable"), or the dataset's own frame ("dataset") for
+// imported datasets whose object does not sit on our turntable.
+// Format version 1; readers refuse newer major versions.
+#pragma once
+
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "carousel/core/camera_model.h"
+#include "carousel/core/view.h"
+
+namespace carousel::studio {
+
+inline constexpr int kSessionFormatVersion = 1;
+inline constexpr const char* kManifestName = "session.json";
+
+struct SessionView {
+  std::string image;             // relative path of the photo
+  std::string mask;              // relative path of its silhouette, empty until made
+  int camera = 0;                // index of the camera in the rig
+  int stop = 0;                  // index of the turntable stop
+  double table_angle_deg = 0.0;  // table angle at capture
+  CameraModel camera_model;      // exact calibration, cam_from_world at this angle
+};
+
+struct GroundTruth {
+  std::string mesh;                // relative path of the scene surface (turntable frame)
+  std::vector<std::string> masks;  // per view, exact silhouettes
+  std::vector<std::string> depth;  // per view, 16-bit PNG, units of depth_unit_m, 0 = none
+  double depth_unit_m = 1e-4;
+  bool empty() const { return mesh.empty() && masks.empty() && depth.empty(); }
+};
+
+struct Session {
+  int version = kSessionFormatVersion;
+  std::string product;          // the product's SKU or name
+  std::string created_utc;      // ISO 8601
+  std::string source;           // "sim:<scene>", "import:middlebury", "capture", ...
+  std::string frame = "turntable";
+  std::vector<SessionView> views;
+  GroundTruth ground_truth;
+  std::map<std::string, std::string> stages;  // stage name -> state ("done", ...)
+};
+
+// Reads <folder>/session.json. \throw IoError (missing) or FormatError (malformed JSON, missing
+// or wrong-typed field, unsupported version, absolute or escaping path) naming the file.
+Session ReadSession(const std::filesystem::path& folder);
+
+// Writes <folder>/session.json atomically. \throw IoError.
+void WriteSessionManifest(const std::filesystem::path& folder, const Session& session);
+
+// The session's photos as Views (absolute paths, cameras, angles, masks when present).
+std::vector<View> SessionViews(const std::filesystem::path& folder, const Session& session);
+
+// The current UTC time as ISO 8601 ("2026-11-22T01:44:27Z").
+std::string NowUtc();
+
+// Creates a new session folder atomically: files go into a hidden staging folder beside the
+// target; Commit() renames it into place (replacing an old session only when `overwrite`, and
+// only once the new one is complete). Destroyed without Commit(), it removes the staging folder
+// and leaves the target untouched.
+class StagedSessionFolder {
+ public:
+  // 	hrow IoError if the target exists (and not `overwrite`) or its parent is missing.
+  StagedSessionFolder(const std::filesystem::path& target, bool overwrite);
+  ~StagedSessionFolder();
+  StagedSessionFolder(const StagedSessionFolder&) = delete;
+  StagedSessionFolder& operator=(const StagedSessionFolder&) = delete;
+  // Where to write now.
+  const std::filesystem::path& staging() const { return staging_; }
+  const std::filesystem::path& target() const { return target_; }
+  // Creates a sub-folder of the staging folder. 	hrow IoError.
+  void CreateFolder(const std::filesystem::path& relative) const;
+  // Moves the finished session into place. 	hrow IoError (the target is then unchanged).
+  void Commit();
+
+ private:
+  std::filesystem::path target_;
+  std::filesystem::path staging_;
+  bool overwrite_;
+  bool committed_ = false;
+};
+
+}  // namespace carousel::studio

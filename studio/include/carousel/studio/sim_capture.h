@@ -1,0 +1,58 @@
+// `carousel sim capture`: a whole capture session on the simulated rig, written as a session
+// folder (session.h) with the exact calibration of every photo and a ground-truth folder.
+//
+// The folder appears atomically: everything is written into a hidden staging folder beside
+// the target and renamed into place at the end, so a failed or cancelled run never leaves a
+// valid-looking half session. An existing session is never replaced unless `overwrite`.
+#pragma once
+
+#include <filesystem>
+#include <string>
+
+#include "carousel/core/progress.h"
+#include "carousel/sim/renderer.h"
+#include "carousel/sim/scene.h"
+#include "carousel/sim/sim_rig.h"
+
+namespace carousel::studio {
+
+struct SimCaptureOptions {
+  // A model name (shoe, bottle, avocado, duck: the glTF models in the shared data) or a path to
+  // a .gltf, .glb or .obj file.
+  std::string scene = "shoe";
+  // The shared test data folder, for model names.
+  std::filesystem::path data_dir;
+  sim::PlacementOptions placement;
+  sim::SimRigOptions rig;
+  // Turntable stops per turn (photos per camera), evenly spaced from 0 deg; >= 1.
+  int stops = 16;
+  // Renderer settings; noise on by default like a real sensor.
+  sim::RenderOptions render = [] {
+    sim::RenderOptions options;
+    options.noise_sigma = 1.5;
+    return options;
+  }();
+  int jpeg_quality = 95;  // 1..100
+  // The product name recorded in the manifest; empty = the scene's name.
+  std::string product;
+  // Replace an existing session folder (after the new one is complete).
+  bool overwrite = false;
+  void Validate() const;
+};
+
+// The file a scene name stands for. \throw InvalidArgument for an unknown name, IoError if the
+// file is missing.
+std::filesystem::path ResolveScene(const std::string& scene, const std::filesystem::path& data_dir);
+
+struct SimCaptureResult {
+  std::filesystem::path session;
+  int views = 0;
+  double render_seconds = 0.0;  // total time in the renderer
+};
+
+// \throw IoError (target exists, cannot write), InvalidArgument, FormatError (scene file),
+//        Cancelled; the target is untouched in every case.
+SimCaptureResult SimulateCapture(const SimCaptureOptions& options,
+                                 const std::filesystem::path& session_folder, Progress& progress);
+
+}  // namespace carousel::studio

@@ -1,0 +1,299 @@
+#include "carousel/studio/import.h"
+
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include <Eigen/SVD>
+
+#include "carousel/core/error.h"
+#include "carousel/core/file_util.h"
+#include "carousel/core/image_io.h"
+#include "carousel/studio/session.h"
+
+namespace carousel::studio {
+namespace {
+
+struct DatasetView {
+  std::string name;  // file name relative to the images folder
+  CameraModel camera;
+};
+
+std::vector<std::string> ReadLines(const std::filesystem::path& path) {
+  const std::vector<std::uint8_t> bytes = ReadFileBytes(path);
+  std::vector<std::string> lines;
+  std::string current;
+  for (std::uint8_t byte : bytes) {
+    if (byte == 0) throw FormatError(path, "binary data in a text file");
+    if (byte == '\n') {
+      lines.push_back(current);
+      current.clear();
+    } else if (byte != '\r') {
+      current.push_back(static_cast<char>(byte));
+    }
+  }
+  if (!current.empty()) lines.push_back(current);
+  return lines;
+}
+
+std::vector<std::string> Split(const std::string& line) {
+  std::istringstream in(line);
+  std::vector<std::string> tokens;
+  std::string token;
+  while (in >> token) tokens.push_back(token);
+  return tokens;
+}
+
+double ToNumber(const std::string& token, const std::filesystem::path& path, std::size_t line) {
+  std::size_t used = 0;
+  double value = 0.0;
+  try {
+    value = std::stod(token, &used);
+  } catch (const std::logic_error&) {
+    used = 0;
+  }
+  if (used != token.size() || !std::isfinite(value)) {
+    throw FormatError(path, "line " + std::to_string(line) + ": '" + token + "' is not a number");
+  }
+  return value;
+}
+
+// The rotation nearest to `m`; refuses matrices that are far from one.
+Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& m, const std::filesystem::path& path,
+                                std::size_t line) {
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(m, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d r = svd.matrixU() * svd.matrixV().transpose();
+  if (r.determinant() < 0 || (r - m).cwiseAbs().maxCoeff() > 1e-3) {
+    throw FormatError(path, "line " + std::to_string(line) + ": R is not a rotation matrix");
+  }
+  return r;
+}
+
+std::vector<DatasetView> ReadMiddlebury(const std::filesystem::path& par,
+                                        const std::filesystem::path& images) {
+  const std::vector<std::string> lines = ReadLines(par);
+  if (lines.empty()) throw FormatError(par, "file is empty");
+  const std::vector<std::string> header = Split(lines[0]);
+  if (header.size() != 1) throw FormatError(par, "line 1: expected the number of images");
+  const double count = ToNumber(header[0], par, 1);
+  if (count < 1 || count != std::floor(count)) {
+    throw FormatError(par, "line 1: bad number of images '" + header[0] + "'");
+  }
+  std::vector<DatasetView> views;
+  for (std::size_t i = 1; i < lines.size(); ++i) {
+    const std::vector<std::string> t = Split(lines[i]);
+    if (t.empty()) continue;
+    const std::size_t line = i + 1;
+    if (t.size() != 22) {
+      throw FormatError(par, "line " + std::to_string(line) + ": expected 22 fields (name, K, R, t), found " +
+                                 std::to_string(t.size()));
+    }
+    double v[21];
+    for (int k = 0; k < 21; ++k) v[k] = ToNumber(t[k + 1], par, line);
+    // K row-major: k11 k12 k13 / k21 k22 k23 / k31 k32 k33.
+    if (std::abs(v[3]) > 1e-9 || std::abs(v[6]) > 1e-9 || std::abs(v[7]) > 1e-9 ||
+        std::abs(v[8] - 1.0) > 1e-9) {
+      throw FormatError(par, "line " + std::to_string(line) + ": K is not an upper-triangular intrinsic matrix");
+    }
+    if (std::abs(v[1]) > 1e-6 * std::abs(v[0])) {
+      throw FormatError(par, "line " + std::to_string(line) + ": skewed pixels (k12 != 0) are not supported");
+    }
+    Eigen::Matrix3d r;
+    for (int k = 0; k < 9; ++k) r(k / 3, k % 3) = v[9 + k];
+    DatasetView view;
+    view.name = t[0];
+    view.camera.fx = v[0];
+    view.camera.cx = v[2];
+    view.camera.fy = v[4];
+    view.camera.cy = v[5];
+    view.camera.cam_from_world = Rigid3d(NearestRotation(r, par, line), {v[18], v[19], v[20]});
+    const cv::Mat photo = ReadImage(images / view.name);
+    view.camera.width = photo.cols;
+    view.camera.height = photo.rows;
+    views.push_back(view);
+  }
+  if (views.size() != static_cast<std::size_t>(count)) {
+    throw FormatError(par, "line 1 announces " + header[0] + " images, the file lists " +
+                               std::to_string(views.size()));
+  }
+  return views;
+}
+
+std::vector<DatasetView> ReadColmap(const std::filesystem::path& model,
+                                    const std::filesystem::path& images) {
+  const std::filesystem::path cameras_txt = model / "cameras.txt";
+  const std::filesystem::path images_txt = model / "images.txt";
+  std::map<long, CameraModel> cameras;
+  const std::vector<std::string> camera_lines = ReadLines(cameras_txt);
+  for (std::size_t i = 0; i < camera_lines.size(); ++i) {
+    const std::vector<std::string> t = Split(camera_lines[i]);
+    if (t.empty() || t[0][0] == '#') continue;
+    const std::size_t line = i + 1;
+    auto fail = [&](const std::string& what) -> void {
+      throw FormatError(cameras_txt, "line " + std::to_string(line) + ": " + what);
+    };
+    if (t.size() < 4) fail("expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS...");
+    const std::string& kind = t[1];
+    std::vector<double> p;
+    for (std::size_t k = 4; k < t.size(); ++k) p.push_back(ToNumber(t[k], cameras_txt, line));
+    CameraModel camera;
+    camera.width = static_cast<int>(ToNumber(t[2], cameras_txt, line));
+    camera.height = static_cast<int>(ToNumber(t[3], cameras_txt, line));
+    auto need = [&](std::size_t n) {
+      if (p.size() != n) fail(kind + " needs " + std::to_string(n) + " parameters");
+    };
+    if (kind == "SIMPLE_PINHOLE") {
+      need(3);
+      camera.fx = camera.fy = p[0];
+      camera.cx = p[1];
+      camera.cy = p[2];
+    } else if (kind == "PINHOLE") {
+      need(4);
+      camera.fx = p[0], camera.fy = p[1], camera.cx = p[2], camera.cy = p[3];
+    } else if (kind == "SIMPLE_RADIAL" || kind == "RADIAL") {
+      need(kind == "RADIAL" ? 5 : 4);
+      camera.fx = camera.fy = p[0];
+      camera.cx = p[1];
+      camera.cy = p[2];
+      camera.distortion.k1 = p[3];
+      if (kind == "RADIAL") camera.distortion.k2 = p[4];
+    } else if (kind == "OPENCV" || kind == "FULL_OPENCV") {
+      need(kind == "OPENCV" ? 8 : 12);
+      camera.fx = p[0], camera.fy = p[1], camera.cx = p[2], camera.cy = p[3];
+      camera.distortion = {p[4], p[5], p[6], p[7], kind == "OPENCV" ? 0.0 : p[8]};
+      if (kind == "FULL_OPENCV" && (p[9] != 0 || p[10] != 0 || p[11] != 0)) {
+        fail("FULL_OPENCV with rational terms k4..k6 is not supported");
+      }
+    } else {
+      fail("camera model " + kind + " is not supported");
+    }
+    // COLMAP: centre of the top-left pixel at (0.5, 0.5); OpenCV: at (0, 0).
+    camera.cx -= 0.5;
+    camera.cy -= 0.5;
+    cameras[static_cast<long>(ToNumber(t[0], cameras_txt, line))] = camera;
+  }
+  std::vector<DatasetView> views;
+  const std::vector<std::string> image_lines = ReadLines(images_txt);
+  bool expect_points = false;
+  for (std::size_t i = 0; i < image_lines.size(); ++i) {
+    if (!image_lines[i].empty() && image_lines[i][0] == '#') continue;
+    if (expect_points) {  // the POINTS2D line that follows every image line
+      expect_points = false;
+      continue;
+    }
+    const std::vector<std::string> t = Split(image_lines[i]);
+    if (t.empty()) continue;
+    const std::size_t line = i + 1;
+    if (t.size() < 10) {
+      throw FormatError(images_txt, "line " + std::to_string(line) +
+                                        ": expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME");
+    }
+    double q[4], tr[3];
+    for (int k = 0; k < 4; ++k) q[k] = ToNumber(t[1 + k], images_txt, line);
+    for (int k = 0; k < 3; ++k) tr[k] = ToNumber(t[5 + k], images_txt, line);
+    const long camera_id = static_cast<long>(ToNumber(t[8], images_txt, line));
+    const auto camera = cameras.find(camera_id);
+    if (camera == cameras.end()) {
+      throw FormatError(images_txt, "line " + std::to_string(line) + ": unknown camera " + t[8]);
+    }
+    const Eigen::Quaterniond rotation(q[0], q[1], q[2], q[3]);
+    if (std::abs(rotation.norm() - 1.0) > 1e-3) {
+      throw FormatError(images_txt, "line " + std::to_string(line) + ": quaternion is not unit length");
+    }
+    DatasetView view;
+    view.name = t[9];
+    view.camera = camera->second;
+    view.camera.cam_from_world =
+        Rigid3d(rotation.normalized().toRotationMatrix(), {tr[0], tr[1], tr[2]});
+    RequireReadableFile(images / view.name);
+    views.push_back(view);
+    expect_points = true;
+  }
+  if (views.empty()) throw FormatError(images_txt, "no images");
+  return views;
+}
+
+void TransferPhoto(const std::filesystem::path& from, const std::filesystem::path& to,
+                   ImportOptions::Transfer transfer) {
+  std::error_code ec;
+  std::filesystem::create_directories(to.parent_path(), ec);
+  switch (transfer) {
+    case ImportOptions::Transfer::kSymlink:
+      std::filesystem::create_symlink(std::filesystem::absolute(from), to, ec);
+      if (ec) throw IoError(to, "cannot link to " + from.string() + ": " + ec.message());
+      return;
+    case ImportOptions::Transfer::kHardLink:
+      std::filesystem::create_hard_link(from, to, ec);
+      if (!ec) return;
+      [[fallthrough]];  // e.g. another file system: copy instead
+    case ImportOptions::Transfer::kCopy:
+      WriteFileAtomic(to, ReadFileBytes(from), {.overwrite = false});
+      return;
+  }
+}
+
+}  // namespace
+
+void ImportOptions::Validate() const {
+  CAROUSEL_THROW_IF(source.empty(), InvalidArgument, "ImportOptions.source is empty");
+  CAROUSEL_THROW_IF(format == Format::kColmap && images_dir.empty(), InvalidArgument,
+                    "a COLMAP import needs the photos' folder (--images)");
+}
+
+ImportResult ImportDataset(const ImportOptions& options,
+                           const std::filesystem::path& session_folder, Progress& progress) {
+  options.Validate();
+  progress.BeginStage("read dataset");
+  std::filesystem::path images = options.images_dir;
+  std::vector<DatasetView> views;
+  std::string kind;
+  if (options.format == ImportOptions::Format::kMiddlebury) {
+    if (images.empty()) images = options.source.parent_path();
+    views = ReadMiddlebury(options.source, images);
+    kind = "middlebury";
+  } else {
+    views = ReadColmap(options.source, images);
+    kind = "colmap";
+  }
+  for (const DatasetView& view : views) {
+    try {
+      view.camera.Validate();
+    } catch (const InvalidArgument& e) {
+      throw FormatError(options.source, view.name + ": " + e.what());
+    }
+  }
+  progress.EndStage();
+
+  StagedSessionFolder folder(session_folder, options.overwrite);
+  folder.CreateFolder("images");
+  Session session;
+  std::filesystem::path dataset_folder = std::filesystem::absolute(options.source).lexically_normal();
+  if (!std::filesystem::is_directory(dataset_folder)) dataset_folder = dataset_folder.parent_path();
+  session.product = options.product.empty() ? dataset_folder.filename().string() : options.product;
+  session.created_utc = NowUtc();
+  session.source = "import:" + kind;
+  session.frame = "dataset";
+  progress.BeginStage("copy photos");
+  for (std::size_t i = 0; i < views.size(); ++i) {
+    progress.CheckCancelled();
+    SessionView view;
+    view.image = (std::filesystem::path("images") / views[i].name).lexically_normal().string();
+    if (view.image.rfind("images/", 0) != 0) {
+      throw FormatError(options.source, "image name '" + views[i].name + "' leaves the folder");
+    }
+    view.camera = 0;
+    view.stop = static_cast<int>(i);
+    view.camera_model = views[i].camera;
+    TransferPhoto(images / views[i].name, folder.staging() / view.image, options.transfer);
+    session.views.push_back(view);
+    progress.Report(i + 1, views.size());
+  }
+  progress.EndStage();
+  session.stages["capture"] = "done";
+  WriteSessionManifest(folder.staging(), session);
+  folder.Commit();
+  return {folder.target(), static_cast<int>(views.size())};
+}
+
+}  // namespace carousel::studio

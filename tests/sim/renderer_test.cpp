@@ -1,0 +1,192 @@
+#include "carousel/sim/renderer.h"
+
+#include <cmath>
+#include <iostream>
+#include <numbers>
+
+#include <gtest/gtest.h>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "carousel/core/error.h"
+#include "carousel/sim/scene.h"
+#include "carousel/sim/sim_rig.h"
+#include "carousel/sim/test_scenes.h"
+#include "carousel/testing/testing.h"
+
+namespace carousel::sim {
+namespace {
+
+CameraModel StudioCamera(int width, int height, double elevation_deg,
+                         const Eigen::AlignedBox3d& bounds, Distortion distortion) {
+  SimRigOptions rig;
+  rig.width = width;
+  rig.height = height;
+  rig.elevations_deg = {elevation_deg};
+  rig.distortion = distortion;
+  return MakeSimRig(rig, bounds).front();
+}
+
+double IoU(const cv::Mat& a, const cv::Mat& b) {
+  cv::Mat both, either;
+  cv::bitwise_and(a, b, both);
+  cv::bitwise_or(a, b, either);
+  return static_cast<double>(cv::countNonZero(both)) / cv::countNonZero(either);
+}
+
+TEST(RendererTest, SphereSilhouetteMatchesTheAnalyticOne) {
+  const double radius = 0.1;
+  const Eigen::Vector3d centre(0.01, -0.02, 0.1);
+  const Scene sphere = MakeSphereScene(radius, centre, 6);
+  for (const Distortion& distortion : {Distortion{}, Distortion{-0.12, 0.05, 0.001, -0.001, 0}}) {
+    const CameraModel camera = StudioCamera(1296, 864, 25, sphere.Bounds(), distortion);
+    RenderOptions options;
+    options.plate_radius_m = 0;
+    const RenderResult result = Render(sphere, camera, 0.3, options);
+    // Analytic: a pixel is inside when the ray through its centre passes within the radius.
+    cv::Mat expected(camera.height, camera.width, CV_8UC1, cv::Scalar(0));
+    for (int y = 0; y < camera.height; ++y) {
+      for (int x = 0; x < camera.width; ++x) {
+        const std::optional<Ray> ray = camera.RayThrough({x, y});
+        ASSERT_TRUE(ray);
+        const Eigen::Vector3d to_centre = centre - ray->origin;
+        const double along = to_centre.dot(ray->direction);
+        if ((to_centre - along * ray->direction).norm() < radius) expected.at<uint8_t>(y, x) = 255;
+      }
+    }
+    EXPECT_GT(cv::countNonZero(expected), 50000);
+    EXPECT_GT(IoU(result.mask, expected), 0.995) << "k1 = " << distortion.k1;
+    // Depth: the nearest point of the sphere is at |C - centre| - r along the optical axis
+    // direction or more; every object pixel is within the sphere's depth range.
+    double min_depth = 1e9, max_depth = 0;
+    for (int y = 0; y < camera.height; ++y) {
+      for (int x = 0; x < camera.width; ++x) {
+        const float d = result.depth.at<float>(y, x);
+        if (d > 0) {
+          min_depth = std::min<double>(min_depth, d);
+          max_depth = std::max<double>(max_depth, d);
+        }
+      }
+    }
+    const double centre_depth = (camera.cam_from_world * centre).z();
+    EXPECT_GT(min_depth, centre_depth - radius - 1e-3);
+    EXPECT_LT(max_depth, centre_depth + 1e-3);
+  }
+}
+
+TEST(RendererTest, CheckerCornersLandWhereTheCameraModelProjectsThem) {
+  constexpr int kSquares = 8;
+  const double size = 0.24;
+  const Scene plane = MakeCheckerPlaneScene(size, kSquares, 0.0, 64);
+  const CameraModel camera =
+      StudioCamera(1296, 864, 55, plane.Bounds(), Distortion{-0.15, 0.08, 0.001, -0.0015, 0.0});
+  RenderOptions options;
+  options.plate_radius_m = 0;
+  options.lit = false;
+  options.samples_per_axis = 4;
+  const RenderResult result = Render(plane, camera, 0.0, options);
+  cv::Mat gray;
+  cv::cvtColor(result.image, gray, cv::COLOR_BGR2GRAY);
+  std::vector<cv::Point2f> corners;
+  ASSERT_TRUE(cv::findChessboardCorners(gray, {kSquares - 1, kSquares - 1}, corners));
+  cv::cornerSubPix(gray, corners, {7, 7}, {-1, -1},
+                   {cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 100, 1e-4});
+  std::vector<Eigen::Vector2d> projected;
+  for (int j = 1; j < kSquares; ++j) {
+    for (int i = 1; i < kSquares; ++i) {
+      const Eigen::Vector3d corner(-size / 2 + i * size / kSquares, -size / 2 + j * size / kSquares,
+                                   0.0);
+      projected.push_back(*camera.Project(corner));
+    }
+  }
+  double worst = 0.0;
+  Eigen::Vector2d bias = Eigen::Vector2d::Zero();
+  for (const cv::Point2f& found : corners) {
+    double nearest = 1e9;
+    Eigen::Vector2d offset;
+    for (const Eigen::Vector2d& p : projected) {
+      const double d = std::hypot(found.x - p.x(), found.y - p.y());
+      if (d < nearest) {
+        nearest = d;
+        offset = Eigen::Vector2d(found.x - p.x(), found.y - p.y());
+      }
+    }
+    worst = std::max(worst, nearest);
+    bias += offset / static_cast<double>(corners.size());
+  }
+  std::cout << "checker corners: worst " << worst << " px, mean offset " << bias.transpose()
+            << "\n";
+  EXPECT_EQ(corners.size(), projected.size());
+  EXPECT_LT(worst, 0.25) << "largest corner error in pixels";
+}
+
+TEST(RendererTest, SameSeedSameBytesAndNoiseOnlyWhereEnabled) {
+  const Scene sphere = MakeSphereScene(0.08, {0, 0, 0.08}, 4);
+  const CameraModel camera = StudioCamera(320, 240, 20, sphere.Bounds(), {});
+  RenderOptions options;
+  options.noise_sigma = 2.0;
+  options.seed = 7;
+  const RenderResult a = Render(sphere, camera, 0.5, options);
+  options.threads = 1;
+  const RenderResult b = Render(sphere, camera, 0.5, options);
+  EXPECT_EQ(cv::norm(a.image, b.image, cv::NORM_INF), 0.0) << "thread count changed the image";
+  options.seed = 8;
+  const RenderResult c = Render(sphere, camera, 0.5, options);
+  EXPECT_GT(cv::norm(a.image, c.image, cv::NORM_L1), 0.0);
+  EXPECT_EQ(cv::norm(a.mask, c.mask, cv::NORM_INF), 0.0) << "the seed only changes noise";
+  // Without noise the seed changes nothing.
+  options.noise_sigma = 0;
+  const RenderResult d = Render(sphere, camera, 0.5, options);
+  options.seed = 9;
+  const RenderResult e = Render(sphere, camera, 0.5, options);
+  EXPECT_EQ(cv::norm(d.image, e.image, cv::NORM_INF), 0.0);
+  // The noise has the requested strength: compare with the noiseless image.
+  cv::Mat noisy, clean;
+  a.image.convertTo(noisy, CV_32F);
+  d.image.convertTo(clean, CV_32F);
+  cv::Scalar mean, stddev;
+  cv::meanStdDev(noisy - clean, mean, stddev);
+  for (int channel = 0; channel < 3; ++channel) {
+    EXPECT_NEAR(stddev[channel], 2.0, 0.3);
+    EXPECT_NEAR(mean[channel], 0.0, 0.5);  // rounding of the clean image biases by < 0.5
+  }
+}
+
+TEST(RendererTest, LightsStayInTheStudioWhileTheTableTurns) {
+  // A sphere on the axis looks the same from every table angle only if the lights stay put.
+  const Scene sphere = MakeSphereScene(0.08, {0, 0, 0.08}, 5, {0.7f, 0.7f, 0.7f});
+  const CameraModel at_zero = StudioCamera(320, 240, 10, sphere.Bounds(), {});
+  RenderOptions options;
+  options.plate_radius_m = 0;
+  const RenderResult a = Render(sphere, at_zero, 0.0, options);
+  const double angle = 2.0;
+  const CameraModel turned = CameraAtTableAngle(at_zero, angle);
+  const RenderResult b = Render(sphere, turned, angle, options);
+  // Lights wrongly fixed to the object instead (angle 0 for the lights).
+  const RenderResult wrong = Render(sphere, turned, 0.0, options);
+  cv::Mat diff_right, diff_wrong;
+  cv::absdiff(a.image, b.image, diff_right);
+  cv::absdiff(a.image, wrong.image, diff_wrong);
+  const double right = cv::mean(diff_right, a.mask)[1];
+  const double off = cv::mean(diff_wrong, a.mask)[1];
+  EXPECT_LT(right, 1.0);
+  EXPECT_GT(off, 10.0 * right + 2.0);
+}
+
+TEST(RendererTest, RejectsBadOptions) {
+  const Scene sphere = MakeSphereScene(0.08, {0, 0, 0.08}, 2);
+  const CameraModel camera = StudioCamera(64, 48, 20, sphere.Bounds(), {});
+  RenderOptions options;
+  options.samples_per_axis = 0;
+  CAROUSEL_EXPECT_THROW_WITH(Render(sphere, camera, 0, options), InvalidArgument,
+                             "samples_per_axis");
+  options = {};
+  options.noise_sigma = -1;
+  EXPECT_THROW(Render(sphere, camera, 0, options), InvalidArgument);
+  CameraModel broken = camera;
+  broken.fx = 0;
+  EXPECT_THROW(Render(sphere, broken, 0, {}), InvalidArgument);
+}
+
+}  // namespace
+}  // namespace carousel::sim
