@@ -103,21 +103,21 @@ Eigen::Vector3f SampleTexture(const Texture& texture, float u, float v, float lo
 
 // A vertex on its way to the screen: camera-frame position and the attributes to interpolate.
 struct ClipVertex {
-  Eigen::Vector3d cam;        // camera frame
-  Eigen::Vector2f uv;         // image convention
-  Eigen::Vector3f normal;     // world frame
+  Eigen::Vector3d cam;     // camera frame
+  Eigen::Vector2f uv;      // image convention
+  Eigen::Vector3f normal;  // world frame
 };
 
 struct ScreenTriangle {
-  double x[3], y[3];          // pixel coordinates (distorted)
-  float inv_z[3];             // 1 / camera z
-  float u_z[3], v_z[3];       // uv / z
-  float n_z[3][3];            // normal / z
-  double area2;               // twice the signed screen area (> 0 after orientation)
-  int material;               // index into the scene's materials, or -1 for the plate
-  float lod;                  // mip level
-  bool object;                // counts for the mask and depth
-  bool flip_normal;           // back face seen: shade the other side
+  double x[3], y[3];     // pixel coordinates (distorted)
+  float inv_z[3];        // 1 / camera z
+  float u_z[3], v_z[3];  // uv / z
+  float n_z[3][3];       // normal / z
+  double area2;          // twice the signed screen area (> 0 after orientation)
+  int material;          // index into the scene's materials, or -1 for the plate
+  float lod;             // mip level
+  bool object;           // counts for the mask and depth
+  bool flip_normal;      // back face seen: shade the other side
 };
 
 class TriangleSetup {
@@ -177,8 +177,8 @@ class TriangleSetup {
     t.lod = 0.0f;
     if (texture != nullptr) {
       const Eigen::Vector2f e1 = v[1].uv - v[0].uv, e2 = v[2].uv - v[0].uv;
-      const double uv_area2 = std::abs(static_cast<double>(e1.x()) * e2.y() -
-                                       static_cast<double>(e2.x()) * e1.y());
+      const double uv_area2 =
+          std::abs(static_cast<double>(e1.x()) * e2.y() - static_cast<double>(e2.x()) * e1.y());
       const double texels = uv_area2 * texture->width() * texture->height();
       if (texels > 0) t.lod = static_cast<float>(0.5 * std::log2(texels / area2));
     }
@@ -200,8 +200,8 @@ class TriangleSetup {
       const Eigen::Vector2d ab = b - a;
       const double length = ab.norm();
       if (length < 1e-9) continue;
-      const double distance = std::abs(ab.x() * (mid.y() - a.y()) - ab.y() * (mid.x() - a.x())) /
-                              length;
+      const double distance =
+          std::abs(ab.x() * (mid.y() - a.y()) - ab.y() * (mid.x() - a.x())) / length;
       if (distance > options_.max_edge_error_px) return true;
     }
     return false;
@@ -370,9 +370,8 @@ class Rasteriser {
       const Material& material = scene_.materials[t.material];
       albedo = material.base_color;
       if (material.texture >= 0) {
-        albedo = albedo.cwiseProduct(
-            SampleTexture(*scene_.textures[material.texture], u - std::floor(u),
-                          v - std::floor(v), t.lod));
+        albedo = albedo.cwiseProduct(SampleTexture(*scene_.textures[material.texture],
+                                                   u - std::floor(u), v - std::floor(v), t.lod));
       }
     }
     const float exposure = static_cast<float>(options_.exposure);
@@ -421,7 +420,8 @@ class Rasteriser {
         const Sample* pixel = &buffer[(static_cast<std::size_t>(y - y0) * w + (x - x0)) * samples_];
         // Fast path: one triangle (or the backdrop) covers every sample.
         bool uniform = true;
-        for (int s = 1; s < samples_ && uniform; ++s) uniform = pixel[s].triangle == pixel[0].triangle;
+        for (int s = 1; s < samples_ && uniform; ++s)
+          uniform = pixel[s].triangle == pixel[0].triangle;
         if (uniform) {
           const int id = pixel[0].triangle;
           if (id < 0) {
@@ -574,7 +574,8 @@ RenderResult Render(const Scene& scene, const CameraModel& camera, double table_
     const int ty0 = std::clamp(static_cast<int>(std::floor(min_y / kTileSize)), 0, tiles_y - 1);
     const int ty1 = std::clamp(static_cast<int>(std::floor(max_y / kTileSize)), 0, tiles_y - 1);
     for (int ty = ty0; ty <= ty1; ++ty) {
-      for (int tx = tx0; tx <= tx1; ++tx) bins[ty * tiles_x + tx].push_back(static_cast<std::uint32_t>(i));
+      for (int tx = tx0; tx <= tx1; ++tx)
+        bins[ty * tiles_x + tx].push_back(static_cast<std::uint32_t>(i));
     }
   }
 
@@ -597,8 +598,9 @@ RenderResult Render(const Scene& scene, const CameraModel& camera, double table_
     std::vector<Sample> buffer;
     for (int tile = next++; tile < tile_count; tile = next++) rasteriser.RenderTile(tile, buffer);
   };
-  int threads = options.threads > 0 ? options.threads
-                                    : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  int threads = options.threads > 0
+                    ? options.threads
+                    : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   threads = std::min(threads, tile_count);
   std::vector<std::thread> pool;
   for (int i = 1; i < threads; ++i) pool.emplace_back(worker);

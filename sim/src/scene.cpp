@@ -6,8 +6,8 @@
 #include <cstring>
 #include <map>
 
-#include <opencv2/imgproc.hpp>
 #include <tiny_gltf.h>
+#include <opencv2/imgproc.hpp>
 
 #include "carousel/core/error.h"
 #include "carousel/core/file_util.h"
@@ -314,10 +314,10 @@ class GltfReader {
           offset);
       Eigen::Vector3f normal = Eigen::Vector3f::Zero();
       if (!normals.empty()) {
-        normal =
-            (normal_matrix * Eigen::Vector3d(normals[3 * i], normals[3 * i + 1], normals[3 * i + 2]))
-                .normalized()
-                .cast<float>();
+        normal = (normal_matrix *
+                  Eigen::Vector3d(normals[3 * i], normals[3 * i + 1], normals[3 * i + 2]))
+                     .normalized()
+                     .cast<float>();
       }
       scene_.normals.push_back(normal);
       scene_.uvs.push_back(uvs.empty() ? Eigen::Vector2f::Zero()
@@ -510,15 +510,13 @@ class ObjReader {
       vt_.emplace_back(std::stof(t[1]), 1.0f - std::stof(t[2]));  // to image convention
     } else if (t[0] == "vn") {
       if (t.size() < 4) throw FormatError(path_, where_ + "normal needs 3 components");
-      vn_.push_back(
-          (up_fix_ * Eigen::Vector3d(std::stod(t[1]), std::stod(t[2]), std::stod(t[3])))
-              .normalized()
-              .cast<float>());
+      vn_.push_back((up_fix_ * Eigen::Vector3d(std::stod(t[1]), std::stod(t[2]), std::stod(t[3])))
+                        .normalized()
+                        .cast<float>());
     } else if (t[0] == "mtllib" && t.size() >= 2) {
       const std::filesystem::path mtl_path = path_.parent_path() / t[1];
       if (!std::filesystem::exists(mtl_path)) {
-        throw IoError(mtl_path, "material library of " + path_.filename().string() +
-                                    " is missing");
+        throw IoError(mtl_path, "material library of " + path_.filename().string() + " is missing");
       }
       mtl_ = ReadMtl(mtl_path);
     } else if (t[0] == "usemtl" && t.size() >= 2) {
@@ -702,9 +700,9 @@ void Scene::Validate() const {
         InvalidArgument, "Scene " << source << ": bad material of triangle " << i);
   }
   for (const Material& material : materials) {
-    CAROUSEL_THROW_IF(material.texture >= static_cast<int>(textures.size()), InvalidArgument,
-                      "Scene " << source << ": material " << material.name
-                               << " has a bad texture index");
+    CAROUSEL_THROW_IF(
+        material.texture >= static_cast<int>(textures.size()), InvalidArgument,
+        "Scene " << source << ": material " << material.name << " has a bad texture index");
   }
   for (const Eigen::Vector3d& p : positions) {
     CAROUSEL_THROW_IF(!p.allFinite(), InvalidArgument,
@@ -714,9 +712,8 @@ void Scene::Validate() const {
 
 Scene LoadScene(const std::filesystem::path& path, const SceneLoadOptions& options) {
   RequireReadableFile(path);
-  const Eigen::Matrix3d up_fix = options.up_axis == SceneLoadOptions::UpAxis::kY
-                                     ? YUpToZUp()
-                                     : Eigen::Matrix3d::Identity();
+  const Eigen::Matrix3d up_fix =
+      options.up_axis == SceneLoadOptions::UpAxis::kY ? YUpToZUp() : Eigen::Matrix3d::Identity();
   const std::string extension = Lowercase(path.extension().string());
   Scene scene;
   if (extension == ".gltf") {
@@ -726,8 +723,8 @@ Scene LoadScene(const std::filesystem::path& path, const SceneLoadOptions& optio
   } else if (extension == ".obj") {
     scene = ObjReader(path, up_fix).Read();
   } else {
-    throw FormatError(path, "unsupported scene format '" + extension +
-                                "' (expected .gltf, .glb or .obj)");
+    throw FormatError(
+        path, "unsupported scene format '" + extension + "' (expected .gltf, .glb or .obj)");
   }
   scene.Validate();
   return scene;

@@ -47,8 +47,7 @@ void SimRigOptions::Validate() const {
     CAROUSEL_THROW_IF(!(elevation >= -10 && elevation <= 85), InvalidArgument,
                       "SimRigOptions.elevations_deg: " << elevation << " is outside -10..85");
   }
-  CAROUSEL_THROW_IF(width < 16 || height < 16 || width > 20000 || height > 20000,
-                    InvalidArgument,
+  CAROUSEL_THROW_IF(width < 16 || height < 16 || width > 20000 || height > 20000, InvalidArgument,
                     "SimRigOptions image size " << width << "x" << height << " is out of range");
   CAROUSEL_THROW_IF(!(sensor_width_mm > 0) || !(focal_length_mm > 0), InvalidArgument,
                     "SimRigOptions.sensor_width_mm and focal_length_mm must be > 0");
@@ -80,8 +79,7 @@ std::vector<CameraModel> MakeSimRig(const SimRigOptions& options,
     camera.cx = 0.5 * (options.width - 1);
     camera.cy = 0.5 * (options.height - 1);
     camera.distortion = options.distortion;
-    const Eigen::Vector3d eye =
-        target + distance * Eigen::Vector3d(0.0, -std::cos(e), std::sin(e));
+    const Eigen::Vector3d eye = target + distance * Eigen::Vector3d(0.0, -std::cos(e), std::sin(e));
     camera.cam_from_world = Rigid3d::LookAt(eye, target);
     camera.Validate();
     cameras.push_back(camera);
@@ -171,8 +169,8 @@ void SimTurntable::WaitUntilStopped(std::chrono::milliseconds timeout) {
   const auto deadline = std::chrono::steady_clock::now() + timeout;
   if (end > deadline) {
     std::this_thread::sleep_until(deadline);
-    throw DeviceError("sim:turntable", "move did not finish within " +
-                                           std::to_string(timeout.count()) + " ms");
+    throw DeviceError("sim:turntable",
+                      "move did not finish within " + std::to_string(timeout.count()) + " ms");
   }
   std::this_thread::sleep_until(end);
 }
@@ -226,9 +224,12 @@ SimCamera::SimCamera(std::shared_ptr<const Scene> scene, CameraModel cam_from_st
                     "SimCamera needs a scene and a turntable");
   cam_from_studio_.Validate();
   options_.Validate();
-  settings_ = {{rig::kSettingIso, "100"},          {rig::kSettingAperture, "f/8"},
-               {rig::kSettingShutterSpeed, "1/125"}, {rig::kSettingWhiteBalance, "daylight"},
-               {rig::kSettingImageFormat, "jpeg"},   {rig::kSettingCaptureTarget, "card"}};
+  settings_ = {{rig::kSettingIso, "100"},
+               {rig::kSettingAperture, "f/8"},
+               {rig::kSettingShutterSpeed, "1/125"},
+               {rig::kSettingWhiteBalance, "daylight"},
+               {rig::kSettingImageFormat, "jpeg"},
+               {rig::kSettingCaptureTarget, "card"}};
 }
 
 rig::CameraInfo SimCamera::Identify() {

@@ -45,8 +45,8 @@ Scene MakeCheckerPlaneScene(double size, int squares, double height, int texels_
   scene.materials.push_back(Material{"checker", {1.0f, 1.0f, 1.0f}, 0, true});
   const double h = 0.5 * size;
   // Texture row 0 (v = 0) at +y: seen from above with +x right, the image reads upright.
-  const Eigen::Vector3d corners[4] = {{-h, -h, height}, {h, -h, height}, {h, h, height},
-                                      {-h, h, height}};
+  const Eigen::Vector3d corners[4] = {
+      {-h, -h, height}, {h, -h, height}, {h, h, height}, {-h, h, height}};
   const Eigen::Vector2f uvs[4] = {{0, 1}, {1, 1}, {1, 0}, {0, 0}};
   for (int k = 0; k < 4; ++k) {
     scene.positions.push_back(corners[k]);

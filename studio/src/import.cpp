@@ -86,7 +86,8 @@ std::vector<DatasetView> ReadMiddlebury(const std::filesystem::path& par,
     if (t.empty()) continue;
     const std::size_t line = i + 1;
     if (t.size() != 22) {
-      throw FormatError(par, "line " + std::to_string(line) + ": expected 22 fields (name, K, R, t), found " +
+      throw FormatError(par, "line " + std::to_string(line) +
+                                 ": expected 22 fields (name, K, R, t), found " +
                                  std::to_string(t.size()));
     }
     double v[21];
@@ -94,10 +95,12 @@ std::vector<DatasetView> ReadMiddlebury(const std::filesystem::path& par,
     // K row-major: k11 k12 k13 / k21 k22 k23 / k31 k32 k33.
     if (std::abs(v[3]) > 1e-9 || std::abs(v[6]) > 1e-9 || std::abs(v[7]) > 1e-9 ||
         std::abs(v[8] - 1.0) > 1e-9) {
-      throw FormatError(par, "line " + std::to_string(line) + ": K is not an upper-triangular intrinsic matrix");
+      throw FormatError(
+          par, "line " + std::to_string(line) + ": K is not an upper-triangular intrinsic matrix");
     }
     if (std::abs(v[1]) > 1e-6 * std::abs(v[0])) {
-      throw FormatError(par, "line " + std::to_string(line) + ": skewed pixels (k12 != 0) are not supported");
+      throw FormatError(
+          par, "line " + std::to_string(line) + ": skewed pixels (k12 != 0) are not supported");
     }
     Eigen::Matrix3d r;
     for (int k = 0; k < 9; ++k) r(k / 3, k % 3) = v[9 + k];
@@ -199,7 +202,8 @@ std::vector<DatasetView> ReadColmap(const std::filesystem::path& model,
     }
     const Eigen::Quaterniond rotation(q[0], q[1], q[2], q[3]);
     if (std::abs(rotation.norm() - 1.0) > 1e-3) {
-      throw FormatError(images_txt, "line " + std::to_string(line) + ": quaternion is not unit length");
+      throw FormatError(images_txt,
+                        "line " + std::to_string(line) + ": quaternion is not unit length");
     }
     DatasetView view;
     view.name = t[9];
@@ -268,7 +272,8 @@ ImportResult ImportDataset(const ImportOptions& options,
   StagedSessionFolder folder(session_folder, options.overwrite);
   folder.CreateFolder("images");
   Session session;
-  std::filesystem::path dataset_folder = std::filesystem::absolute(options.source).lexically_normal();
+  std::filesystem::path dataset_folder =
+      std::filesystem::absolute(options.source).lexically_normal();
   if (!std::filesystem::is_directory(dataset_folder)) dataset_folder = dataset_folder.parent_path();
   session.product = options.product.empty() ? dataset_folder.filename().string() : options.product;
   session.created_utc = NowUtc();

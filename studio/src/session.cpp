@@ -29,12 +29,11 @@ json CameraToJson(const CameraModel& camera) {
           {"cx", camera.cx},
           {"cy", camera.cy},
           {"distortion",
-           {camera.distortion.k1, camera.distortion.k2, camera.distortion.p1,
-            camera.distortion.p2, camera.distortion.k3}},
+           {camera.distortion.k1, camera.distortion.k2, camera.distortion.p1, camera.distortion.p2,
+            camera.distortion.k3}},
           {"cam_from_world",
            {{"rotation_row_major", rotation},
-            {"translation",
-             {pose.translation.x(), pose.translation.y(), pose.translation.z()}}}}};
+            {"translation", {pose.translation.x(), pose.translation.y(), pose.translation.z()}}}}};
 }
 
 // Field access that turns every JSON problem into a FormatError naming the field.
@@ -69,7 +68,8 @@ class Reader {
     if (!value.is_string()) Fail(where + "." + key + " is not a string");
     return value.get<std::string>();
   }
-  std::vector<double> Numbers(const json& value, std::size_t count, const std::string& where) const {
+  std::vector<double> Numbers(const json& value, std::size_t count,
+                              const std::string& where) const {
     if (!value.is_array() || value.size() != count) {
       Fail(where + " must be an array of " + std::to_string(count) + " numbers");
     }
@@ -104,14 +104,15 @@ class Reader {
     camera.fy = Number(value, "fy", where);
     camera.cx = Number(value, "cx", where);
     camera.cy = Number(value, "cy", where);
-    const std::vector<double> d = Numbers(Field(value, "distortion", where), 5, where + ".distortion");
+    const std::vector<double> d =
+        Numbers(Field(value, "distortion", where), 5, where + ".distortion");
     camera.distortion = {d[0], d[1], d[2], d[3], d[4]};
     const json& pose = Field(value, "cam_from_world", where);
-    const std::vector<double> r = Numbers(Field(pose, "rotation_row_major", where + ".cam_from_world"),
-                                          9, where + ".cam_from_world.rotation_row_major");
-    const std::vector<double> t =
-        Numbers(Field(pose, "translation", where + ".cam_from_world"), 3,
-                where + ".cam_from_world.translation");
+    const std::vector<double> r =
+        Numbers(Field(pose, "rotation_row_major", where + ".cam_from_world"), 9,
+                where + ".cam_from_world.rotation_row_major");
+    const std::vector<double> t = Numbers(Field(pose, "translation", where + ".cam_from_world"), 3,
+                                          where + ".cam_from_world.translation");
     for (int i = 0; i < 9; ++i) camera.cam_from_world.rotation(i / 3, i % 3) = r[i];
     camera.cam_from_world.translation = Eigen::Vector3d(t[0], t[1], t[2]);
     try {
@@ -209,7 +210,8 @@ Session ReadSession(const std::filesystem::path& folder) {
     view.camera = read.Integer(views[i], "camera", where);
     view.stop = read.Integer(views[i], "stop", where);
     view.table_angle_deg = read.Number(views[i], "table_angle_deg", where);
-    view.camera_model = read.Camera(read.Field(views[i], "camera_model", where), where + ".camera_model");
+    view.camera_model =
+        read.Camera(read.Field(views[i], "camera_model", where), where + ".camera_model");
     session.views.push_back(view);
   }
   if (manifest.contains("stages")) {
@@ -226,13 +228,12 @@ Session ReadSession(const std::filesystem::path& folder) {
     for (const char* key : {"masks", "depth"}) {
       const json& list = read.Field(truth, key, "ground_truth");
       if (!list.is_array()) read.Fail(std::string("ground_truth.") + key + " is not an array");
-      auto& out = std::string(key) == "masks" ? session.ground_truth.masks
-                                              : session.ground_truth.depth;
+      auto& out =
+          std::string(key) == "masks" ? session.ground_truth.masks : session.ground_truth.depth;
       for (std::size_t i = 0; i < list.size(); ++i) {
         const json wrapper = {{"path", list[i]}};
-        out.push_back(read.RelativePath(wrapper, "path",
-                                        std::string("ground_truth.") + key + "[" +
-                                            std::to_string(i) + "]"));
+        out.push_back(read.RelativePath(
+            wrapper, "path", std::string("ground_truth.") + key + "[" + std::to_string(i) + "]"));
       }
     }
     session.ground_truth.depth_unit_m = read.Number(truth, "depth_unit_m", "ground_truth");

@@ -24,7 +24,7 @@ struct TurntableStatus {
   double target_rad = 0.0;  // last commanded position
   bool moving = false;
   bool homed = false;
-  std::string fault;        // empty when healthy
+  std::string fault;  // empty when healthy
 };
 
 class Turntable {

@@ -39,7 +39,7 @@ class Texture {
 struct Material {
   std::string name;
   Eigen::Vector3f base_color{1.0f, 1.0f, 1.0f};  // multiplies the texture; sRGB-encoded, 0..1
-  int texture = -1;                               // index into Scene::textures, -1 = none
+  int texture = -1;                              // index into Scene::textures, -1 = none
   bool double_sided = true;
 };
 
@@ -53,7 +53,7 @@ struct Scene {
   std::vector<int> triangle_material;      // index into materials
   std::vector<Material> materials;
   std::vector<std::shared_ptr<const Texture>> textures;
-  std::string source;                      // file it came from, or a procedural name
+  std::string source;  // file it came from, or a procedural name
 
   std::size_t TriangleCount() const { return triangles.size(); }
   Eigen::AlignedBox3d Bounds() const;

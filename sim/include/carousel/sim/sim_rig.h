@@ -27,10 +27,10 @@ namespace carousel::sim {
 struct SimRigOptions {
   // One camera per entry, degrees above the plate (-10..85).
   std::vector<double> elevations_deg = {20.0};
-  int width = 5184;                 // pixels
-  int height = 3456;                // pixels
-  double sensor_width_mm = 22.3;    // APS-C
-  double focal_length_mm = 50.0;    // > 0
+  int width = 5184;               // pixels
+  int height = 3456;              // pixels
+  double sensor_width_mm = 22.3;  // APS-C
+  double focal_length_mm = 50.0;  // > 0
   // Camera-to-object-centre distance, metres; 0 = frame the object (see `fill`).
   double distance_m = 0.0;
   // Fraction of the shorter image side the object's bounding sphere spans when framing (0..1).
@@ -49,8 +49,8 @@ CameraModel CameraAtTableAngle(const CameraModel& at_zero, double table_angle_ra
 // ---- simulated devices ---------------------------------------------------------------------
 
 struct SimTurntableOptions {
-  double max_speed_deg_s = 60.0;      // > 0
-  double acceleration_deg_s2 = 180.0; // > 0
+  double max_speed_deg_s = 60.0;       // > 0
+  double acceleration_deg_s2 = 180.0;  // > 0
   // Wall-clock time per simulated second: 1 = real time, 0 = moves finish at once.
   double time_scale = 1.0;
   void Validate() const;

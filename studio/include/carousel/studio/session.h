@@ -45,9 +45,9 @@ struct GroundTruth {
 
 struct Session {
   int version = kSessionFormatVersion;
-  std::string product;          // the product's SKU or name
-  std::string created_utc;      // ISO 8601
-  std::string source;           // "sim:<scene>", "import:middlebury", "capture", ...
+  std::string product;      // the product's SKU or name
+  std::string created_utc;  // ISO 8601
+  std::string source;       // "sim:<scene>", "import:middlebury", "capture", ...
   std::string frame = "turntable";
   std::vector<SessionView> views;
   GroundTruth ground_truth;
