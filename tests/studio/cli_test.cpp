@@ -121,3 +121,36 @@ TEST(CliBinaryTest, HelpAndUnbuiltCommandFromTheExecutable) {
 
 }  // namespace
 }  // namespace carousel::studio
+
+namespace carousel::studio {
+namespace {
+
+TEST(CliBinaryTest, SimCaptureAndImportFromTheExecutable) {
+  testing::TempDir dir;
+  const std::string data = testing::SharedDataDir().string();
+  const CliResult capture =
+      RunBinary("sim capture --data " + data + " --scene avocado --views 3 --size 200x150 " +
+                "--elevations 10,50 --target-height 0.1 --backdrop '#20a040' --out " +
+                (dir / "avo").string());
+  EXPECT_EQ(capture.code, 0) << capture.out;
+  EXPECT_THAT(capture.out, HasSubstr("6 views"));
+  EXPECT_TRUE(std::filesystem::exists(dir / "avo/images/cam1_stop02.jpg"));
+  // Again without --force: refused, the session stays.
+  const CliResult again =
+      RunBinary("sim capture --data " + data + " --scene avocado --views 1 --size 200x150 --out " +
+                (dir / "avo").string());
+  EXPECT_EQ(again.code, kExitIoError) << again.out;
+  EXPECT_THAT(again.out, HasSubstr("--force"));
+  EXPECT_TRUE(std::filesystem::exists(dir / "avo/images/cam1_stop02.jpg"));
+  const CliResult bad = RunBinary("sim capture --scene teapot --out " + (dir / "x").string());
+  EXPECT_EQ(bad.code, kExitUsage);
+  EXPECT_THAT(bad.out, HasSubstr("unknown scene 'teapot'"));
+  const CliResult imported =
+      RunBinary("import " + data + "/middlebury/templeSparseRing/templeSR_par.txt --out " +
+                (dir / "temple").string() + " --link hard");
+  EXPECT_EQ(imported.code, 0) << imported.out;
+  EXPECT_THAT(imported.out, HasSubstr("16 views imported"));
+}
+
+}  // namespace
+}  // namespace carousel::studio
