@@ -4,6 +4,8 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <exception>
+#include <mutex>
 #include <numbers>
 #include <thread>
 
@@ -14,7 +16,9 @@ namespace carousel::sim {
 namespace {
 
 constexpr int kTileSize = 32;
-constexpr int kMaxSubdivision = 8;
+constexpr int kMaxSubdivision = 12;
+// Edges shorter than this on screen are never split, however much the lens bends them.
+constexpr double kMinSplitLengthPx = 0.25;
 
 // ---- colour ---------------------------------------------------------------------------------
 
@@ -36,7 +40,8 @@ struct ColourTables {
     }
   }
   float Encode(float linear) const {
-    const float x = std::clamp(linear, 0.0f, 1.0f) * kEncodeSize;
+    if (!(linear > 0.0f)) return 0.0f;  // also NaN
+    const float x = std::min(linear, 1.0f) * kEncodeSize;
     const int i = std::min(static_cast<int>(x), kEncodeSize - 1);
     const float f = x - i;
     return to_srgb255[i] + f * (to_srgb255[i + 1] - to_srgb255[i]);
@@ -132,7 +137,10 @@ class TriangleSetup {
       if (!(vertex.cam.z() > options_.near_m)) return;
     }
     std::array<Eigen::Vector2d, 3> p;
-    for (int k = 0; k < 3; ++k) p[k] = camera_.ProjectFromCam(v[k].cam);
+    for (int k = 0; k < 3; ++k) {
+      p[k] = camera_.ProjectFromCam(v[k].cam);
+      if (!p[k].allFinite()) return;  // far outside the lens model's range
+    }
     // Cull what lies wholly outside the image.
     const double min_x = std::min({p[0].x(), p[1].x(), p[2].x()});
     const double max_x = std::max({p[0].x(), p[1].x(), p[2].x()});
@@ -142,14 +150,43 @@ class TriangleSetup {
         min_y > camera_.height - 0.5) {
       return;
     }
-    if (depth < kMaxSubdivision && !camera_.distortion.IsZero() && NeedsSplit(v, p)) {
-      std::array<ClipVertex, 3> m;
-      for (int k = 0; k < 3; ++k) m[k] = Midpoint(v[k], v[(k + 1) % 3]);
-      Add({v[0], m[0], m[2]}, material, object, flip_normal, texture, depth + 1);
-      Add({m[0], v[1], m[1]}, material, object, flip_normal, texture, depth + 1);
-      Add({m[2], m[1], v[2]}, material, object, flip_normal, texture, depth + 1);
-      Add({m[0], m[1], m[2]}, material, object, flip_normal, texture, depth + 1);
-      return;
+    if (depth < kMaxSubdivision && !camera_.distortion.IsZero()) {
+      // Each edge decides from its own endpoints, so the two triangles sharing it agree and
+      // no T-junction (a crack) appears between them.
+      bool split[3];
+      int splits = 0;
+      for (int k = 0; k < 3; ++k)
+        splits += (split[k] = EdgeNeedsSplit(v[k].cam, v[(k + 1) % 3].cam));
+      auto add = [&](const ClipVertex& a, const ClipVertex& b, const ClipVertex& c) {
+        Add({a, b, c}, material, object, flip_normal, texture, depth + 1);
+      };
+      if (splits == 3) {
+        std::array<ClipVertex, 3> m;
+        for (int k = 0; k < 3; ++k) m[k] = Midpoint(v[k], v[(k + 1) % 3]);
+        add(v[0], m[0], m[2]);
+        add(m[0], v[1], m[1]);
+        add(m[2], m[1], v[2]);
+        add(m[0], m[1], m[2]);
+        return;
+      }
+      if (splits == 1) {
+        const int k = split[0] ? 0 : split[1] ? 1 : 2;
+        const ClipVertex m = Midpoint(v[k], v[(k + 1) % 3]);
+        add(v[k], m, v[(k + 2) % 3]);
+        add(m, v[(k + 1) % 3], v[(k + 2) % 3]);
+        return;
+      }
+      if (splits == 2) {
+        const int u = !split[0] ? 0 : !split[1] ? 1 : 2;  // the edge kept whole
+        const ClipVertex& a = v[u];
+        const ClipVertex& b = v[(u + 1) % 3];
+        const ClipVertex& c = v[(u + 2) % 3];
+        const ClipVertex bc = Midpoint(b, c), ca = Midpoint(c, a);
+        add(c, ca, bc);
+        add(a, b, bc);
+        add(a, bc, ca);
+        return;
+      }
     }
     ScreenTriangle t{};
     double area2 = (p[1].x() - p[0].x()) * (p[2].y() - p[0].y()) -
@@ -190,21 +227,21 @@ class TriangleSetup {
     return {0.5 * (a.cam + b.cam), 0.5f * (a.uv + b.uv), (0.5f * (a.normal + b.normal))};
   }
 
-  // True when the lens bends an edge further than allowed from its straight image.
-  bool NeedsSplit(const std::array<ClipVertex, 3>& v,
-                  const std::array<Eigen::Vector2d, 3>& p) const {
-    for (int k = 0; k < 3; ++k) {
-      const Eigen::Vector2d a = p[k], b = p[(k + 1) % 3];
-      const Eigen::Vector3d mid3 = 0.5 * (v[k].cam + v[(k + 1) % 3].cam);
-      const Eigen::Vector2d mid = camera_.ProjectFromCam(mid3);
-      const Eigen::Vector2d ab = b - a;
-      const double length = ab.norm();
-      if (length < 1e-9) continue;
-      const double distance =
-          std::abs(ab.x() * (mid.y() - a.y()) - ab.y() * (mid.x() - a.x())) / length;
-      if (distance > options_.max_edge_error_px) return true;
-    }
-    return false;
+  // True when the lens bends the edge (a, b) further than allowed from its straight image.
+  // Computed in a canonical endpoint order: both triangles sharing the edge get the same answer.
+  bool EdgeNeedsSplit(const Eigen::Vector3d& a_in, const Eigen::Vector3d& b_in) const {
+    const bool swap =
+        std::lexicographical_compare(b_in.data(), b_in.data() + 3, a_in.data(), a_in.data() + 3);
+    const Eigen::Vector3d& a = swap ? b_in : a_in;
+    const Eigen::Vector3d& b = swap ? a_in : b_in;
+    const Eigen::Vector2d pa = camera_.ProjectFromCam(a), pb = camera_.ProjectFromCam(b);
+    const Eigen::Vector2d mid = camera_.ProjectFromCam(0.5 * (a + b));
+    const Eigen::Vector2d ab = pb - pa;
+    const double length = ab.norm();
+    if (!(length > kMinSplitLengthPx) || !mid.allFinite()) return false;
+    const double distance =
+        std::abs(ab.x() * (mid.y() - pa.y()) - ab.y() * (mid.x() - pa.x())) / length;
+    return distance > options_.max_edge_error_px;
   }
 
   const CameraModel& camera_;
@@ -291,24 +328,34 @@ class Rasteriser {
   void RasteriseTriangle(std::uint32_t index, int x0, int y0, int x1, int y1, int w,
                          std::vector<Sample>& buffer) const {
     const ScreenTriangle& t = triangles_[index];
-    const int bx0 = std::max(x0, static_cast<int>(std::floor(std::min({t.x[0], t.x[1], t.x[2]}))));
-    const int bx1 =
-        std::min(x1 - 1, static_cast<int>(std::ceil(std::max({t.x[0], t.x[1], t.x[2]}))));
-    const int by0 = std::max(y0, static_cast<int>(std::floor(std::min({t.y[0], t.y[1], t.y[2]}))));
-    const int by1 =
-        std::min(y1 - 1, static_cast<int>(std::ceil(std::max({t.y[0], t.y[1], t.y[2]}))));
+    // Clamp in double before converting: vertices can project far outside the image.
+    auto clamp_to = [](double value, int lo, int hi) {
+      return static_cast<int>(std::clamp(value, static_cast<double>(lo), static_cast<double>(hi)));
+    };
+    const int bx0 = clamp_to(std::floor(std::min({t.x[0], t.x[1], t.x[2]})), x0, x1);
+    const int bx1 = clamp_to(std::ceil(std::max({t.x[0], t.x[1], t.x[2]})), x0 - 1, x1 - 1);
+    const int by0 = clamp_to(std::floor(std::min({t.y[0], t.y[1], t.y[2]})), y0, y1);
+    const int by1 = clamp_to(std::ceil(std::max({t.y[0], t.y[1], t.y[2]})), y0 - 1, y1 - 1);
     if (bx0 > bx1 || by0 > by1) return;
     // Edge k is opposite vertex k, from vertex a = k+1 to b = k+2:
-    // E_k(p) = cross(b - a, p - a) = ex * px + ey * py + ec, positive inside, and
-    // E_k / area2 is the screen-space barycentric of vertex k.
-    double ex[3], ey[3], ec[3];
+    // E_k(p) = cross(b - a, p - a), positive inside; E_k / area2 is the screen-space
+    // barycentric of vertex k. Evaluated from the edge's endpoints in a canonical order and
+    // negated when needed, so two triangles sharing an edge get exactly opposite values and
+    // the top-left rule gives every sample on it to exactly one of them.
+    double ox[3], oy[3], dx[3], dy[3], sign[3];
     bool top_left[3];
     for (int k = 0; k < 3; ++k) {
-      const int a = (k + 1) % 3, b = (k + 2) % 3;
-      ex[k] = -(t.y[b] - t.y[a]);
-      ey[k] = t.x[b] - t.x[a];
-      ec[k] = -(t.x[a] * ex[k] + t.y[a] * ey[k]);
+      int a = (k + 1) % 3, b = (k + 2) % 3;
       top_left[k] = TopLeft(t.x[a], t.y[a], t.x[b], t.y[b]);
+      sign[k] = 1.0;
+      if (t.x[b] < t.x[a] || (t.x[b] == t.x[a] && t.y[b] < t.y[a])) {
+        std::swap(a, b);
+        sign[k] = -1.0;
+      }
+      ox[k] = t.x[a];
+      oy[k] = t.y[a];
+      dx[k] = t.x[b] - t.x[a];
+      dy[k] = t.y[b] - t.y[a];
     }
     const double inv_area = 1.0 / t.area2;
     for (int y = by0; y <= by1; ++y) {
@@ -319,7 +366,7 @@ class Rasteriser {
           double e[3];
           bool inside = true;
           for (int k = 0; k < 3 && inside; ++k) {
-            e[k] = ex[k] * px + ey[k] * py + ec[k];
+            e[k] = sign[k] * (dx[k] * (py - oy[k]) - dy[k] * (px - ox[k]));
             inside = e[k] > 0 || (e[k] == 0 && top_left[k]);
           }
           if (!inside) continue;
@@ -495,15 +542,21 @@ class Rasteriser {
 void RenderOptions::Validate() const {
   CAROUSEL_THROW_IF(samples_per_axis < 1 || samples_per_axis > 4, InvalidArgument,
                     "RenderOptions.samples_per_axis must be in 1..4, got " << samples_per_axis);
-  CAROUSEL_THROW_IF(!(ambient >= 0), InvalidArgument, "RenderOptions.ambient must be >= 0");
+  CAROUSEL_THROW_IF(!(ambient >= 0 && ambient < 1e3), InvalidArgument,
+                    "RenderOptions.ambient must be in [0, 1000)");
+  for (const Eigen::Vector3d* colour : {&backdrop_top, &backdrop_bottom, &plate_color}) {
+    CAROUSEL_THROW_IF(!colour->allFinite(), InvalidArgument,
+                      "RenderOptions: backdrop and plate colours must be finite");
+  }
   CAROUSEL_THROW_IF(!(exposure > 0 && exposure < 1e3), InvalidArgument,
                     "RenderOptions.exposure must be in (0, 1000), got " << exposure);
   for (const DirectionalLight& light : lights) {
-    CAROUSEL_THROW_IF(!(light.intensity >= 0) || !(light.wrap >= 0 && light.wrap <= 1) ||
-                          !(light.direction_studio.norm() > 0),
-                      InvalidArgument,
-                      "RenderOptions.lights: intensity >= 0, wrap in 0..1 and a non-zero "
-                      "direction are required");
+    CAROUSEL_THROW_IF(
+        !(light.intensity >= 0 && light.intensity < 1e3) || !(light.wrap >= 0 && light.wrap <= 1) ||
+            !light.direction_studio.allFinite() || !(light.direction_studio.norm() > 0),
+        InvalidArgument,
+        "RenderOptions.lights: intensity in [0, 1000), wrap in 0..1 and a finite, "
+        "non-zero direction are required");
   }
   CAROUSEL_THROW_IF(!(plate_radius_m >= 0), InvalidArgument,
                     "RenderOptions.plate_radius_m must be >= 0");
@@ -565,14 +618,14 @@ RenderResult Render(const Scene& scene, const CameraModel& camera, double table_
   std::vector<std::vector<std::uint32_t>> bins(static_cast<std::size_t>(tiles_x) * tiles_y);
   for (std::size_t i = 0; i < triangles.size(); ++i) {
     const ScreenTriangle& t = triangles[i];
-    const double min_x = std::min({t.x[0], t.x[1], t.x[2]}) - 1;
-    const double max_x = std::max({t.x[0], t.x[1], t.x[2]}) + 1;
-    const double min_y = std::min({t.y[0], t.y[1], t.y[2]}) - 1;
-    const double max_y = std::max({t.y[0], t.y[1], t.y[2]}) + 1;
-    const int tx0 = std::clamp(static_cast<int>(std::floor(min_x / kTileSize)), 0, tiles_x - 1);
-    const int tx1 = std::clamp(static_cast<int>(std::floor(max_x / kTileSize)), 0, tiles_x - 1);
-    const int ty0 = std::clamp(static_cast<int>(std::floor(min_y / kTileSize)), 0, tiles_y - 1);
-    const int ty1 = std::clamp(static_cast<int>(std::floor(max_y / kTileSize)), 0, tiles_y - 1);
+    auto tile_of = [](double coordinate, int tiles) {
+      return static_cast<int>(
+          std::clamp(std::floor(coordinate / kTileSize), 0.0, static_cast<double>(tiles - 1)));
+    };
+    const int tx0 = tile_of(std::min({t.x[0], t.x[1], t.x[2]}) - 1, tiles_x);
+    const int tx1 = tile_of(std::max({t.x[0], t.x[1], t.x[2]}) + 1, tiles_x);
+    const int ty0 = tile_of(std::min({t.y[0], t.y[1], t.y[2]}) - 1, tiles_y);
+    const int ty1 = tile_of(std::max({t.y[0], t.y[1], t.y[2]}) + 1, tiles_y);
     for (int ty = ty0; ty <= ty1; ++ty) {
       for (int tx = tx0; tx <= tx1; ++tx)
         bins[ty * tiles_x + tx].push_back(static_cast<std::uint32_t>(i));
@@ -594,18 +647,34 @@ RenderResult Render(const Scene& scene, const CameraModel& camera, double table_
   Rasteriser rasteriser(scene, camera, options, triangles, bins, tiles_x, lights_world, result);
   const int tile_count = tiles_x * tiles_y;
   std::atomic<int> next{0};
+  std::mutex error_mutex;
+  std::exception_ptr error;
+  // A worker that fails (out of memory) stops everyone; the error is rethrown after joining.
   auto worker = [&] {
-    std::vector<Sample> buffer;
-    for (int tile = next++; tile < tile_count; tile = next++) rasteriser.RenderTile(tile, buffer);
+    try {
+      std::vector<Sample> buffer;
+      for (int tile = next++; tile < tile_count; tile = next++) rasteriser.RenderTile(tile, buffer);
+    } catch (...) {
+      next = tile_count;
+      std::lock_guard<std::mutex> lock(error_mutex);
+      if (!error) error = std::current_exception();
+    }
   };
   int threads = options.threads > 0
                     ? options.threads
                     : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   threads = std::min(threads, tile_count);
-  std::vector<std::thread> pool;
-  for (int i = 1; i < threads; ++i) pool.emplace_back(worker);
-  worker();
-  for (std::thread& thread : pool) thread.join();
+  {
+    std::vector<std::jthread> pool;
+    try {
+      for (int i = 1; i < threads; ++i) pool.emplace_back(worker);
+    } catch (...) {
+      next = tile_count;  // the started workers stop; jthread joins them
+      throw;
+    }
+    worker();
+  }
+  if (error) std::rethrow_exception(error);
   return result;
 }
 

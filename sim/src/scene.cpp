@@ -211,12 +211,23 @@ class GltfReader {
     if (component_size <= 0) Fail(std::string(what) + " accessor has an unknown component type");
     const std::size_t element_size = static_cast<std::size_t>(component_size) * components;
     const std::size_t stride = view.byteStride != 0 ? view.byteStride : element_size;
-    const std::size_t start = view.byteOffset + accessor.byteOffset;
-    if (accessor.count > 0 &&
-        (start + stride * (accessor.count - 1) + element_size > buffer.size() ||
-         accessor.byteOffset + stride * (accessor.count - 1) + element_size > view.byteLength)) {
+    // Bounds in an order that cannot overflow: the view inside the buffer, the accessor's
+    // first element inside the view, and the number of further elements that fit.
+    const auto past_end = [&] {
       Fail(std::string(what) + " accessor reaches past the end of its buffer (truncated .bin?)");
+    };
+    if (view.byteOffset > buffer.size() || view.byteLength > buffer.size() - view.byteOffset) {
+      past_end();
     }
+    if (stride < element_size || accessor.byteOffset > view.byteLength ||
+        element_size > view.byteLength - accessor.byteOffset) {
+      if (accessor.count > 0) past_end();
+    }
+    if (accessor.count > 0 &&
+        accessor.count - 1 > (view.byteLength - accessor.byteOffset - element_size) / stride) {
+      past_end();
+    }
+    const std::size_t start = view.byteOffset + accessor.byteOffset;
     std::vector<double> values(accessor.count * components);
     for (std::size_t i = 0; i < accessor.count; ++i) {
       const unsigned char* element = buffer.data() + start + i * stride;
@@ -704,9 +715,16 @@ void Scene::Validate() const {
         material.texture >= static_cast<int>(textures.size()), InvalidArgument,
         "Scene " << source << ": material " << material.name << " has a bad texture index");
   }
-  for (const Eigen::Vector3d& p : positions) {
-    CAROUSEL_THROW_IF(!p.allFinite(), InvalidArgument,
-                      "Scene " << source << ": a vertex is not finite");
+  for (std::size_t i = 0; i < n; ++i) {
+    CAROUSEL_THROW_IF(!positions[i].allFinite() || !normals[i].allFinite() || !uvs[i].allFinite(),
+                      InvalidArgument,
+                      "Scene " << source << ": vertex " << i << " has a non-finite position, "
+                               << "normal or texture coordinate");
+  }
+  for (const Material& material : materials) {
+    CAROUSEL_THROW_IF(
+        !material.base_color.allFinite(), InvalidArgument,
+        "Scene " << source << ": material " << material.name << " has a non-finite colour");
   }
 }
 

@@ -119,25 +119,44 @@ double SimTurntable::MoveSeconds(double distance_rad) const {
   return d >= ramp ? d / v + v / a : 2.0 * std::sqrt(d / a);
 }
 
-double SimTurntable::AngleAt(std::chrono::steady_clock::time_point now) const {
-  if (duration_s_ <= 0 || options_.time_scale <= 0) return target_rad_;
-  const double t = std::chrono::duration<double>(now - start_time_).count() / options_.time_scale;
-  const double total = duration_s_ / options_.time_scale;  // simulated seconds
-  if (t >= total) return target_rad_;
-  // Distance covered along the trapezoidal (or triangular) speed profile.
+// Distance covered and speed after `t` simulated seconds of the current move.
+void SimTurntable::Profile(double t, double* distance, double* speed) const {
   const double d = std::abs(target_rad_ - start_rad_);
   const double a = options_.acceleration_deg_s2 * kDegToRad;
+  if (brake_speed_ > 0) {  // decelerating from brake_speed_ to rest
+    const double tt = std::min(t, brake_speed_ / a);
+    *distance = std::min(d, brake_speed_ * tt - 0.5 * a * tt * tt);
+    *speed = std::max(0.0, brake_speed_ - a * tt);
+    return;
+  }
   const double v = std::min(options_.max_speed_deg_s * kDegToRad, std::sqrt(d * a));
   const double ramp = v / a;
-  double s = 0;
-  if (t < ramp) {
-    s = 0.5 * a * t * t;
+  const double total = v > 0 ? d / v + ramp : 0.0;
+  if (t >= total) {
+    *distance = d;
+    *speed = 0.0;
+  } else if (t < ramp) {
+    *distance = 0.5 * a * t * t;
+    *speed = a * t;
   } else if (t < total - ramp) {
-    s = 0.5 * a * ramp * ramp + v * (t - ramp);
+    *distance = 0.5 * a * ramp * ramp + v * (t - ramp);
+    *speed = v;
   } else {
-    s = d - 0.5 * a * (total - t) * (total - t);
+    *distance = d - 0.5 * a * (total - t) * (total - t);
+    *speed = a * (total - t);
   }
-  s = std::clamp(s, 0.0, d);
+  *distance = std::clamp(*distance, 0.0, d);
+}
+
+double SimTurntable::AngleAt(std::chrono::steady_clock::time_point now, double* speed) const {
+  double s = 0.0, v = 0.0;
+  if (duration_s_ <= 0 || options_.time_scale <= 0) {
+    s = std::abs(target_rad_ - start_rad_);
+  } else {
+    const double t = std::chrono::duration<double>(now - start_time_).count() / options_.time_scale;
+    Profile(t, &s, &v);
+  }
+  if (speed != nullptr) *speed = v;
   return start_rad_ + (target_rad_ >= start_rad_ ? s : -s);
 }
 
@@ -155,6 +174,7 @@ void SimTurntable::StartMoveTo(double angle_rad) {
   const auto now = std::chrono::steady_clock::now();
   start_rad_ = AngleAt(now);
   target_rad_ = angle_rad;
+  brake_speed_ = 0;
   start_time_ = now;
   duration_s_ = MoveSeconds(target_rad_ - start_rad_) * options_.time_scale;
 }
@@ -189,21 +209,19 @@ rig::TurntableStatus SimTurntable::Status() {
 void SimTurntable::Stop(bool emergency) {
   std::lock_guard<std::mutex> lock(mutex_);
   const auto now = std::chrono::steady_clock::now();
-  const double here = AngleAt(now);
-  if (emergency || duration_s_ <= 0) {
-    start_rad_ = target_rad_ = here;
-    duration_s_ = 0;
-    return;
-  }
-  // Decelerate: stop after the braking distance at the current direction of travel.
+  double speed = 0.0;
+  const double here = AngleAt(now, &speed);
   const double direction = target_rad_ >= start_rad_ ? 1.0 : -1.0;
-  const double v = options_.max_speed_deg_s * kDegToRad;
-  const double braking = 0.5 * v * v / (options_.acceleration_deg_s2 * kDegToRad);
-  const double remaining = std::abs(target_rad_ - here);
-  start_rad_ = here;
-  target_rad_ = here + direction * std::min(braking, remaining);
+  start_rad_ = target_rad_ = here;
   start_time_ = now;
-  duration_s_ = MoveSeconds(target_rad_ - start_rad_) * options_.time_scale;
+  duration_s_ = 0;
+  brake_speed_ = 0;
+  if (emergency || speed <= 0) return;
+  // Decelerate from the current speed at the configured rate.
+  const double a = options_.acceleration_deg_s2 * kDegToRad;
+  target_rad_ = here + direction * speed * speed / (2 * a);
+  brake_speed_ = speed;
+  duration_s_ = speed / a * options_.time_scale;
 }
 
 // ---- SimCamera ------------------------------------------------------------------------------
@@ -287,8 +305,11 @@ rig::CapturedPhoto SimCamera::Capture(std::chrono::milliseconds) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
     render.seed = options_.render.seed ^ (0x51ed27ULL * static_cast<std::uint64_t>(next_photo_));
-    path = "/store_00010001/DCIM/100SIMCA/IMG_" + std::to_string(10000 + next_photo_).substr(1) +
-           ".JPG";
+    // Like a camera: IMG_0001..IMG_9999 per folder, then the next folder (100SIMCA, 101SIMCA).
+    const int folder = 100 + (next_photo_ - 1) / 9999;
+    const int number = (next_photo_ - 1) % 9999 + 1;
+    path = "/store_00010001/DCIM/" + std::to_string(folder) + "SIMCA/IMG_" +
+           std::to_string(10000 + number).substr(1) + ".JPG";
     ++next_photo_;
   }
   const RenderResult result =

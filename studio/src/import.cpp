@@ -141,8 +141,14 @@ std::vector<DatasetView> ReadColmap(const std::filesystem::path& model,
     std::vector<double> p;
     for (std::size_t k = 4; k < t.size(); ++k) p.push_back(ToNumber(t[k], cameras_txt, line));
     CameraModel camera;
-    camera.width = static_cast<int>(ToNumber(t[2], cameras_txt, line));
-    camera.height = static_cast<int>(ToNumber(t[3], cameras_txt, line));
+    const double width = ToNumber(t[2], cameras_txt, line);
+    const double height = ToNumber(t[3], cameras_txt, line);
+    if (!(width >= 1 && width <= 100000 && height >= 1 && height <= 100000) ||
+        width != std::floor(width) || height != std::floor(height)) {
+      fail("bad image size " + t[2] + "x" + t[3]);
+    }
+    camera.width = static_cast<int>(width);
+    camera.height = static_cast<int>(height);
     auto need = [&](std::size_t n) {
       if (p.size() != n) fail(kind + " needs " + std::to_string(n) + " parameters");
     };
@@ -210,7 +216,14 @@ std::vector<DatasetView> ReadColmap(const std::filesystem::path& model,
     view.camera = camera->second;
     view.camera.cam_from_world =
         Rigid3d(rotation.normalized().toRotationMatrix(), {tr[0], tr[1], tr[2]});
-    RequireReadableFile(images / view.name);
+    const cv::Mat photo = ReadImage(images / view.name);
+    if (photo.cols != view.camera.width || photo.rows != view.camera.height) {
+      throw FormatError(images / view.name, "photo is " + std::to_string(photo.cols) + "x" +
+                                                std::to_string(photo.rows) +
+                                                " but its camera in cameras.txt is " +
+                                                std::to_string(view.camera.width) + "x" +
+                                                std::to_string(view.camera.height));
+    }
     views.push_back(view);
     expect_points = true;
   }
@@ -269,6 +282,15 @@ ImportResult ImportDataset(const ImportOptions& options,
   }
   progress.EndStage();
 
+  // --force must never replace the folder the dataset itself lives in.
+  const auto inside = [](const std::filesystem::path& child, const std::filesystem::path& parent) {
+    const std::string c = std::filesystem::weakly_canonical(child).string() + "/";
+    const std::string p = std::filesystem::weakly_canonical(parent).string() + "/";
+    return c.rfind(p, 0) == 0;
+  };
+  if (inside(options.source, session_folder) || inside(images, session_folder)) {
+    throw IoError(session_folder, "holds the dataset being imported; choose another folder");
+  }
   StagedSessionFolder folder(session_folder, options.overwrite);
   folder.CreateFolder("images");
   Session session;

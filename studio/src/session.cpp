@@ -3,7 +3,9 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <cstdint>
 #include <ctime>
+#include <limits>
 #include <numbers>
 
 #include <nlohmann/json.hpp>
@@ -59,7 +61,11 @@ class Reader {
   int Integer(const json& object, const std::string& key, const std::string& where) const {
     const json& value = Field(object, key, where);
     if (!value.is_number_integer()) Fail(where + "." + key + " is not an integer");
-    return value.get<int>();
+    const auto wide = value.get<std::int64_t>();
+    if (wide < std::numeric_limits<int>::min() || wide > std::numeric_limits<int>::max()) {
+      Fail(where + "." + key + " is out of range");
+    }
+    return static_cast<int>(wide);
   }
   std::string String(const json& object, const std::string& key, const std::string& where,
                      bool required = true) const {
@@ -259,8 +265,16 @@ StagedSessionFolder::StagedSessionFolder(const std::filesystem::path& target, bo
   std::error_code ec;
   target_ = std::filesystem::absolute(target).lexically_normal();
   if (target_.filename().empty()) target_ = target_.parent_path();
-  if (std::filesystem::exists(target_, ec) && !overwrite) {
-    throw IoError(target_, "exists; choose another folder or pass --force to replace it");
+  if (std::filesystem::exists(target_, ec)) {
+    if (!overwrite) {
+      throw IoError(target_, "exists; choose another folder or pass --force to replace it");
+    }
+    // --force replaces sessions, never an arbitrary folder.
+    if (!std::filesystem::is_regular_file(target_ / kManifestName, ec)) {
+      throw IoError(target_,
+                    "exists and is not a Carousel session folder (no session.json); "
+                    "refusing to replace it");
+    }
   }
   const std::filesystem::path parent = target_.parent_path();
   if (!std::filesystem::is_directory(parent, ec)) {
@@ -298,8 +312,12 @@ void StagedSessionFolder::Commit() {
   std::filesystem::rename(staging_, target_, ec);
   if (ec) {
     const std::string reason = ec.message();
-    if (!old.empty()) std::filesystem::rename(old, target_, ec);
-    throw IoError(target_, "cannot move the new session into place: " + reason);
+    std::string where;
+    if (!old.empty()) {
+      std::filesystem::rename(old, target_, ec);
+      if (ec) where = "; the previous session is kept at " + old.string();
+    }
+    throw IoError(target_, "cannot move the new session into place: " + reason + where);
   }
   committed_ = true;
   SyncFolder(parent);

@@ -83,6 +83,13 @@ SimCaptureResult SimulateCapture(const SimCaptureOptions& options,
   const std::filesystem::path& staging = folder.staging();
 
   Session session;
+  // Depth unit: 0.1 mm, coarser when the farthest surface would not fit in 16 bits.
+  double farthest = 0.0;
+  const double radius = 0.5 * scene.Bounds().sizes().norm();
+  for (const CameraModel& camera : rig) {
+    farthest = std::max(farthest, (camera.Centre() - scene.Bounds().center()).norm() + radius);
+  }
+  session.ground_truth.depth_unit_m = std::max(1e-4, 1.05 * farthest / 65535.0);
   session.product = options.product.empty() ? options.scene : options.product;
   session.created_utc = NowUtc();
   session.source = "sim:" + scene_path.filename().string();

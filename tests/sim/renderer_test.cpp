@@ -9,6 +9,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "carousel/core/error.h"
+#include "carousel/core/mesh_primitives.h"
 #include "carousel/sim/scene.h"
 #include "carousel/sim/sim_rig.h"
 #include "carousel/sim/test_scenes.h"
@@ -173,6 +174,50 @@ TEST(RendererTest, LightsStayInTheStudioWhileTheTableTurns) {
   const double off = cv::mean(diff_wrong, a.mask)[1];
   EXPECT_LT(right, 1.0);
   EXPECT_GT(off, 10.0 * right + 2.0);
+}
+
+// A finely tessellated disc under strong distortion: triangles split where the lens bends
+// their edges, neighbours differently; no backdrop may show through between them.
+TEST(RendererTest, SubdividedNeighboursLeaveNoCracks) {
+  const Mesh disc = MakeDisc(0.12, 24, 3);  // large triangles: the lens bends them
+  Scene scene;
+  scene.source = "disc";
+  for (Mesh::VertexHandle v : disc.vertices()) {
+    const OpenMesh::Vec3d& p = disc.point(v);
+    scene.positions.emplace_back(p[0], p[1], 0.0);
+    scene.normals.emplace_back(0.0f, 0.0f, 1.0f);
+    scene.uvs.emplace_back(0.0f, 0.0f);
+  }
+  for (Mesh::FaceHandle f : disc.faces()) {
+    auto fv = disc.cfv_iter(f);
+    const int a = fv->idx(), b = (++fv)->idx(), c = (++fv)->idx();
+    scene.triangles.emplace_back(a, b, c);
+    scene.triangle_material.push_back(0);
+  }
+  scene.materials.push_back(Material{"red", {0.8f, 0.05f, 0.05f}, -1, true});
+  SimRigOptions rig;
+  rig.width = 800;
+  rig.height = 600;
+  rig.elevations_deg = {60};
+  rig.distance_m = 0.4;  // close: the disc reaches the image corners, where the lens bends most
+  rig.distortion = {-0.35, 0.15, 0.002, -0.002, 0.0};
+  const CameraModel camera = CameraAtTableAngle(MakeSimRig(rig, scene.Bounds()).front(), 0.4);
+  RenderOptions options;
+  options.plate_radius_m = 0;
+  options.lit = false;
+  options.samples_per_axis = 1;  // one sample per pixel: a crack would show as a pixel
+  options.max_edge_error_px = 0.02;
+  const RenderResult result = Render(scene, camera, 0.4, options);
+  cv::Mat filled;
+  const cv::Mat kernel = cv::getStructuringElement(cv::MORPH_ELLIPSE, {7, 7});
+  cv::morphologyEx(result.mask, filled, cv::MORPH_CLOSE, kernel);
+  cv::Mat interior;
+  cv::erode(filled, interior, kernel);
+  cv::Mat holes;
+  cv::bitwise_and(interior, ~result.mask, holes);
+  EXPECT_GT(result.triangles_rasterized, scene.TriangleCount()) << "nothing was subdivided";
+  EXPECT_GT(cv::countNonZero(interior), 50000);
+  EXPECT_EQ(cv::countNonZero(holes), 0) << "pixels inside the disc show the backdrop";
 }
 
 TEST(RendererTest, RejectsBadOptions) {

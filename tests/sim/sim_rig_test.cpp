@@ -80,6 +80,20 @@ TEST(SimTurntableTest, RealTimeMoveIsObservableAndStops) {
   EXPECT_EQ(table.Status().angle_rad, stopped_at);
 }
 
+TEST(SimTurntableTest, StopDeceleratesFromTheCurrentSpeed) {
+  SimTurntable table({.max_speed_deg_s = 90, .acceleration_deg_s2 = 360, .time_scale = 0.2});
+  table.StartMoveTo(360 * kDeg);       // 4.25 s simulated; full speed after 0.25 s
+  std::this_thread::sleep_for(200ms);  // ~1 s simulated: cruising
+  const double before = table.Status().angle_rad;
+  table.Stop(/*emergency=*/false);
+  table.WaitUntilStopped(2s);
+  const rig::TurntableStatus after = table.Status();
+  EXPECT_FALSE(after.moving);
+  // Braking distance v^2 / 2a = 90^2 / 720 = 11.25 deg (give or take the time between calls).
+  EXPECT_NEAR((after.angle_rad - before) / kDeg, 11.25, 3.0);
+  EXPECT_LT(after.angle_rad, 360 * kDeg);
+}
+
 TEST(SimCameraTest, CapturesAndDownloadsAPhotoOfTheTurnedScene) {
   auto scene = std::make_shared<Scene>(MakeSphereScene(0.08, {0, 0, 0.08}, 3));
   auto table = std::make_shared<SimTurntable>(SimTurntableOptions{.time_scale = 0.0});

@@ -111,6 +111,25 @@ TEST(ImportTest, ColmapTextModelShiftsThePrincipalPoint) {
   // 90 deg about y: camera x axis = world -z.
   EXPECT_THAT(two.cam_from_world.rotation * Eigen::Vector3d(0, 0, 1),
               testing::EigenNear(Eigen::Vector3d(1, 0, 0), 1e-12));
+  // A photo whose size disagrees with its camera.
+  testing::WriteBytes(dir / "sparse/cameras.txt",
+                      "1 PINHOLE 64 48 100 101 40 30\n2 PINHOLE 80 60 90 91 41 29\n");
+  CAROUSEL_EXPECT_THROW_WITH(ImportDataset({.format = ImportOptions::Format::kColmap,
+                                            .source = dir / "sparse",
+                                            .images_dir = dir / "photos"},
+                                           dir / "s3", progress),
+                             FormatError, "one.png: photo is 80x60 but its camera");
+  // --force never replaces the folder that holds the dataset.
+  testing::WriteBytes(dir / "sparse/cameras.txt",
+                      "1 PINHOLE 80 60 100 101 40 30\n2 PINHOLE 80 60 90 91 41 29\n");
+  testing::WriteBytes(dir / "session.json", "{}");
+  CAROUSEL_EXPECT_THROW_WITH(ImportDataset({.format = ImportOptions::Format::kColmap,
+                                            .source = dir / "sparse",
+                                            .images_dir = dir / "photos",
+                                            .overwrite = true},
+                                           dir.path(), progress),
+                             IoError, "holds the dataset");
+  EXPECT_TRUE(std::filesystem::exists(dir / "photos/one.png"));
   testing::WriteBytes(dir / "sparse/cameras.txt", "1 FISHEYE 80 60 100 40 30 0.1\n");
   CAROUSEL_EXPECT_THROW_WITH(ImportDataset({.format = ImportOptions::Format::kColmap,
                                             .source = dir / "sparse",

@@ -113,6 +113,19 @@ TEST(SimCaptureTest, NeverReplacesASessionWithoutForceAndLeavesNothingOnFailure)
   EXPECT_EQ(ReadSession(dir / "s").views.size(), 4u);
 }
 
+TEST(SimCaptureTest, ForceNeverReplacesAFolderThatIsNotASession) {
+  TempDir dir;
+  std::filesystem::create_directories(dir / "photos");
+  testing::WriteBytes(dir / "photos/precious.jpg", "not a session");
+  SimCaptureOptions options = SmallCapture();
+  options.stops = 1;
+  options.overwrite = true;
+  Progress progress;
+  CAROUSEL_EXPECT_THROW_WITH(SimulateCapture(options, dir / "photos", progress), IoError,
+                             "not a Carousel session folder");
+  EXPECT_EQ(testing::ReadBytes(dir / "photos/precious.jpg"), "not a session");
+}
+
 TEST(SessionTest, ReaderNamesTheProblem) {
   TempDir dir;
   const auto write = [&](const std::string& text) {

@@ -57,7 +57,7 @@ struct RenderOptions {
   std::uint64_t seed = 0;
   // Largest distance, in pixels, between a projected 3D edge and its straight-line image
   // before the triangle is subdivided (lens distortion curves edges).
-  double max_edge_error_px = 0.05;
+  double max_edge_error_px = 0.02;
   // Worker threads; 0 = one per hardware thread.
   int threads = 0;
   // Near plane, metres: triangles with a vertex closer to the camera are skipped.

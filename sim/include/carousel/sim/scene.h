@@ -38,7 +38,7 @@ class Texture {
 
 struct Material {
   std::string name;
-  Eigen::Vector3f base_color{1.0f, 1.0f, 1.0f};  // multiplies the texture; sRGB-encoded, 0..1
+  Eigen::Vector3f base_color{1.0f, 1.0f, 1.0f};  // multiplies the texture; linear, 0..1
   int texture = -1;                              // index into Scene::textures, -1 = none
   bool double_sided = true;
 };
@@ -62,8 +62,8 @@ struct Scene {
   // Recomputes smooth vertex normals from the faces (area-weighted).
   void RecomputeNormals();
   // The geometry as a Mesh, with vertices at equal positions welded (glTF splits vertices at
-  // UV seams), e.g. the ground-truth surface. \throw FormatError-free: faces OpenMesh cannot
-  // add (non-manifold) get their own vertices.
+  // UV seams), e.g. the ground-truth surface. Faces OpenMesh cannot add (non-manifold after
+  // welding) keep their own vertices, so no face is lost.
   Mesh ToMesh() const;
   // \throw InvalidArgument if arrays disagree in size, an index is out of range or a
   // coordinate is not finite.
@@ -92,13 +92,13 @@ struct PlacementOptions {
   void Validate() const;
 };
 
-// Scales the scene, centres its bounding box on the turntable axis and sets it on the plate
-// (lowest point at z = 0). Returns the transform applied (scale folded into the result's
-// note: positions_after = scale * R * positions_before + t).
+// What PlaceOnTurntable did: positions_after = transform * (scale * positions_before).
 struct Placement {
   double scale = 1.0;
   Rigid3d transform;  // rotation and translation applied after scaling
 };
+// Scales the scene, centres its bounding box on the turntable axis and sets it on the plate
+// (lowest point at z = 0). \throw InvalidArgument for bad options or an empty scene.
 Placement PlaceOnTurntable(Scene& scene, const PlacementOptions& options);
 
 }  // namespace carousel::sim

@@ -70,13 +70,16 @@ class SimTurntable : public rig::Turntable {
   double MoveSeconds(double distance_rad) const;
 
  private:
-  double AngleAt(std::chrono::steady_clock::time_point now) const;  // needs mutex_
+  // The angle (and speed, rad/s) at `now`; the caller holds mutex_.
+  double AngleAt(std::chrono::steady_clock::time_point now, double* speed = nullptr) const;
+  void Profile(double t, double* distance, double* speed) const;
   SimTurntableOptions options_;
   mutable std::mutex mutex_;
   double start_rad_ = 0.0;
   double target_rad_ = 0.0;
   std::chrono::steady_clock::time_point start_time_{};
-  double duration_s_ = 0.0;  // wall-clock seconds of the current move
+  double duration_s_ = 0.0;   // wall-clock seconds of the current move
+  double brake_speed_ = 0.0;  // > 0: the move is a stop decelerating from this speed, rad/s
   bool homed_ = false;
 };
 
