@@ -15,6 +15,7 @@
 #include "carousel/core/error.h"
 #include "carousel/core/file_util.h"
 #include "carousel/core/logging.h"
+#include "carousel/core/text.h"
 #include "openmesh_streams.h"
 
 namespace carousel {
@@ -64,18 +65,6 @@ void RequireCompleteLastLine(const std::filesystem::path& path, std::string_view
   std::string last(text.substr(start == std::string_view::npos ? 0 : start + 1));
   if (last.size() > 40) last = last.substr(0, 40) + "...";
   throw FormatError(path, "truncated: the file ends inside a line ('" + last + "')");
-}
-
-std::vector<std::string_view> SplitWhitespace(std::string_view line) {
-  std::vector<std::string_view> tokens;
-  std::size_t i = 0;
-  while (i < line.size()) {
-    while (i < line.size() && std::isspace(static_cast<unsigned char>(line[i]))) ++i;
-    const std::size_t start = i;
-    while (i < line.size() && !std::isspace(static_cast<unsigned char>(line[i]))) ++i;
-    if (i > start) tokens.push_back(line.substr(start, i - start));
-  }
-  return tokens;
 }
 
 bool ParseDouble(std::string_view token, double* value) {

@@ -13,6 +13,7 @@
 #include "carousel/core/file_util.h"
 #include "carousel/core/image_io.h"
 #include "carousel/core/logging.h"
+#include "carousel/core/text.h"
 
 namespace carousel::sim {
 namespace {
@@ -421,42 +422,13 @@ struct ObjMaterialFile {
   std::map<std::string, std::filesystem::path> texture_paths;
 };
 
-std::vector<std::string> Tokens(const std::string& line) {
-  std::vector<std::string> tokens;
-  std::size_t i = 0;
-  while (i < line.size()) {
-    while (i < line.size() && std::isspace(static_cast<unsigned char>(line[i]))) ++i;
-    const std::size_t start = i;
-    while (i < line.size() && !std::isspace(static_cast<unsigned char>(line[i]))) ++i;
-    if (i > start) tokens.push_back(line.substr(start, i - start));
-  }
-  return tokens;
-}
-
-std::vector<std::string> Lines(const std::vector<std::uint8_t>& bytes,
-                               const std::filesystem::path& path) {
-  std::vector<std::string> lines;
-  std::string current;
-  for (std::uint8_t byte : bytes) {
-    if (byte == 0) throw FormatError(path, "binary data in a text file");
-    if (byte == '\n') {
-      lines.push_back(current);
-      current.clear();
-    } else if (byte != '\r') {
-      current.push_back(static_cast<char>(byte));
-    }
-  }
-  if (!current.empty()) lines.push_back(current);
-  return lines;
-}
-
 ObjMaterialFile ReadMtl(const std::filesystem::path& path) {
   ObjMaterialFile file;
-  const std::vector<std::string> lines = Lines(ReadFileBytes(path), path);
+  const std::vector<std::string> lines = ReadTextLines(path);
   Material* current = nullptr;
   std::string current_name;
   for (std::size_t number = 0; number < lines.size(); ++number) {
-    const std::vector<std::string> t = Tokens(lines[number]);
+    const std::vector<std::string> t = SplitWords(lines[number]);
     if (t.empty() || t[0][0] == '#') continue;
     const std::string where = "line " + std::to_string(number + 1) + ": ";
     try {
@@ -487,10 +459,10 @@ class ObjReader {
   }
 
   Scene Read() {
-    const std::vector<std::string> lines = Lines(ReadFileBytes(path_), path_);
+    const std::vector<std::string> lines = ReadTextLines(path_);
     if (lines.empty()) throw FormatError(path_, "file is empty");
     for (std::size_t number = 0; number < lines.size(); ++number) {
-      const std::vector<std::string> t = Tokens(lines[number]);
+      const std::vector<std::string> t = SplitWords(lines[number]);
       if (t.empty() || t[0][0] == '#') continue;
       where_ = "line " + std::to_string(number + 1) + ": ";
       try {

@@ -1,15 +1,14 @@
 #include "carousel/studio/import.h"
 
 #include <cmath>
-#include <fstream>
 #include <map>
-#include <sstream>
 
 #include <Eigen/SVD>
 
 #include "carousel/core/error.h"
 #include "carousel/core/file_util.h"
 #include "carousel/core/image_io.h"
+#include "carousel/core/text.h"
 #include "carousel/studio/session.h"
 
 namespace carousel::studio {
@@ -19,31 +18,6 @@ struct DatasetView {
   std::string name;  // file name relative to the images folder
   CameraModel camera;
 };
-
-std::vector<std::string> ReadLines(const std::filesystem::path& path) {
-  const std::vector<std::uint8_t> bytes = ReadFileBytes(path);
-  std::vector<std::string> lines;
-  std::string current;
-  for (std::uint8_t byte : bytes) {
-    if (byte == 0) throw FormatError(path, "binary data in a text file");
-    if (byte == '\n') {
-      lines.push_back(current);
-      current.clear();
-    } else if (byte != '\r') {
-      current.push_back(static_cast<char>(byte));
-    }
-  }
-  if (!current.empty()) lines.push_back(current);
-  return lines;
-}
-
-std::vector<std::string> Split(const std::string& line) {
-  std::istringstream in(line);
-  std::vector<std::string> tokens;
-  std::string token;
-  while (in >> token) tokens.push_back(token);
-  return tokens;
-}
 
 double ToNumber(const std::string& token, const std::filesystem::path& path, std::size_t line) {
   std::size_t used = 0;
@@ -72,9 +46,9 @@ Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& m, const std::filesystem:
 
 std::vector<DatasetView> ReadMiddlebury(const std::filesystem::path& par,
                                         const std::filesystem::path& images) {
-  const std::vector<std::string> lines = ReadLines(par);
+  const std::vector<std::string> lines = ReadTextLines(par);
   if (lines.empty()) throw FormatError(par, "file is empty");
-  const std::vector<std::string> header = Split(lines[0]);
+  const std::vector<std::string> header = SplitWords(lines[0]);
   if (header.size() != 1) throw FormatError(par, "line 1: expected the number of images");
   const double count = ToNumber(header[0], par, 1);
   if (count < 1 || count != std::floor(count)) {
@@ -82,7 +56,7 @@ std::vector<DatasetView> ReadMiddlebury(const std::filesystem::path& par,
   }
   std::vector<DatasetView> views;
   for (std::size_t i = 1; i < lines.size(); ++i) {
-    const std::vector<std::string> t = Split(lines[i]);
+    const std::vector<std::string> t = SplitWords(lines[i]);
     if (t.empty()) continue;
     const std::size_t line = i + 1;
     if (t.size() != 22) {
@@ -128,9 +102,9 @@ std::vector<DatasetView> ReadColmap(const std::filesystem::path& model,
   const std::filesystem::path cameras_txt = model / "cameras.txt";
   const std::filesystem::path images_txt = model / "images.txt";
   std::map<long, CameraModel> cameras;
-  const std::vector<std::string> camera_lines = ReadLines(cameras_txt);
+  const std::vector<std::string> camera_lines = ReadTextLines(cameras_txt);
   for (std::size_t i = 0; i < camera_lines.size(); ++i) {
-    const std::vector<std::string> t = Split(camera_lines[i]);
+    const std::vector<std::string> t = SplitWords(camera_lines[i]);
     if (t.empty() || t[0][0] == '#') continue;
     const std::size_t line = i + 1;
     auto fail = [&](const std::string& what) -> void {
@@ -183,7 +157,7 @@ std::vector<DatasetView> ReadColmap(const std::filesystem::path& model,
     cameras[static_cast<long>(ToNumber(t[0], cameras_txt, line))] = camera;
   }
   std::vector<DatasetView> views;
-  const std::vector<std::string> image_lines = ReadLines(images_txt);
+  const std::vector<std::string> image_lines = ReadTextLines(images_txt);
   bool expect_points = false;
   for (std::size_t i = 0; i < image_lines.size(); ++i) {
     if (!image_lines[i].empty() && image_lines[i][0] == '#') continue;
@@ -191,7 +165,7 @@ std::vector<DatasetView> ReadColmap(const std::filesystem::path& model,
       expect_points = false;
       continue;
     }
-    const std::vector<std::string> t = Split(image_lines[i]);
+    const std::vector<std::string> t = SplitWords(image_lines[i]);
     if (t.empty()) continue;
     const std::size_t line = i + 1;
     if (t.size() < 10) {
