@@ -5,27 +5,41 @@
 
 namespace carousel::sim {
 
-Scene MakeSphereScene(double radius, const Eigen::Vector3d& centre, int subdivisions,
-                      const Eigen::Vector3f& color) {
-  const Mesh sphere = MakeIcosphere(radius, subdivisions, {centre.x(), centre.y(), centre.z()});
+Scene SceneFromMesh(const Mesh& mesh, const Eigen::Vector3f& color, const std::string& source) {
+  Mesh shaded = mesh;
+  shaded.RecomputeNormals();
   Scene scene;
-  scene.source = "procedural sphere";
-  for (Mesh::VertexHandle v : sphere.vertices()) {
-    const OpenMesh::Vec3d& p = sphere.point(v);
+  scene.source = source;
+  for (Mesh::VertexHandle v : shaded.vertices()) {
+    const OpenMesh::Vec3d& p = shaded.point(v);
+    const OpenMesh::Vec3d& n = shaded.normal(v);
     scene.positions.emplace_back(p[0], p[1], p[2]);
-    scene.normals.push_back(((Eigen::Vector3d(p[0], p[1], p[2]) - centre) / radius).cast<float>());
+    scene.normals.emplace_back(n[0], n[1], n[2]);
     scene.uvs.emplace_back(0.0f, 0.0f);
   }
-  for (Mesh::FaceHandle f : sphere.faces()) {
-    auto fv = sphere.cfv_iter(f);
+  for (Mesh::FaceHandle f : shaded.faces()) {
+    auto fv = shaded.cfv_iter(f);
     const int a = fv->idx();
     const int b = (++fv)->idx();
     const int c = (++fv)->idx();
     scene.triangles.emplace_back(a, b, c);
     scene.triangle_material.push_back(0);
   }
-  scene.materials.push_back(Material{"sphere", color, -1, false});
+  scene.materials.push_back(Material{source, color, -1, false});
   return scene;
+}
+
+Scene MakeSphereScene(double radius, const Eigen::Vector3d& centre, int subdivisions,
+                      const Eigen::Vector3f& color) {
+  return SceneFromMesh(MakeIcosphere(radius, subdivisions, {centre.x(), centre.y(), centre.z()}),
+                       color, "procedural sphere");
+}
+
+Scene MakeRingScene(double major_radius, double minor_radius, const Eigen::Vector3f& color) {
+  Mesh torus = MakeTorus(major_radius, minor_radius, 96, 48);
+  for (const auto v : torus.vertices())
+    torus.set_point(v, torus.point(v) + OpenMesh::Vec3d(0.0, 0.0, minor_radius));
+  return SceneFromMesh(torus, color, "procedural ring");
 }
 
 Scene MakeCheckerPlaneScene(double size, int squares, double height, int texels_per_square) {

@@ -16,6 +16,7 @@
 #include "carousel/core/progress.h"
 #include "carousel/core/version.h"
 #include "carousel/studio/import.h"
+#include "carousel/studio/reconstruct.h"
 #include "carousel/studio/self_check.h"
 #include "carousel/studio/sim_capture.h"
 #include "carousel/studio/terminal_progress.h"
@@ -32,8 +33,6 @@ struct PlannedCommand {
 };
 
 constexpr PlannedCommand kPlannedCommands[] = {
-    {"reconstruct", "silhouettes, visual hull and optimized mesh of a session",
-     "issue 4 (reconstruction)"},
     {"texture", "texture atlas and texture map of a session's mesh; export OBJ and GLB",
      "issues 5 and 6 (texture atlas, texture transfer)"},
     {"process", "run every processing stage of one or more sessions", "issue 9 (studio pipeline)"},
@@ -180,6 +179,27 @@ int RunImport(ImportArgs& args, std::ostream& out, std::ostream& err) {
   return kExitOk;
 }
 
+struct ReconstructArgs {
+  ReconstructOptions options;
+  std::filesystem::path session;
+  std::string method = "key";
+};
+
+int RunReconstruct(ReconstructArgs& args, std::ostream& out, std::ostream& err) {
+  args.options.silhouettes.method = recon::ParseSilhouetteMethod(args.method);
+  CliProgress cli(err);
+  const ReconstructResult result = ReconstructSession(args.session, args.options, cli.progress);
+  const std::filesystem::path& s = args.session;
+  out << std::fixed << std::setprecision(2) << "masks " << (s / "masks").string() << ": "
+      << result.views << " silhouettes (" << result.seconds_silhouettes << " s)\n"
+      << "hull " << (s / "recon/hull.ply").string() << ": " << result.hull_faces << " faces, "
+      << std::setprecision(3) << result.voxel_size_m * 1e3 << " mm voxels (" << std::setprecision(2)
+      << result.seconds_hull << " s)\n"
+      << "mesh " << (s / "recon/mesh.ply").string() << ": " << result.mesh_faces << " faces ("
+      << result.seconds_mesh << " s)\n";
+  return kExitOk;
+}
+
 int RunSelfCheckCommand(const SelfCheckOptions& options, std::ostream& out, std::ostream& err) {
   CliProgress cli(err);
   const SelfCheckResult result = RunSelfCheck(options, cli.progress);
@@ -305,6 +325,32 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
   import_command->add_flag("--force", import_args.options.overwrite,
                            "replace an existing session folder");
 
+  // carousel reconstruct
+  ReconstructArgs reconstruct;
+  CLI::App* reconstruct_command =
+      app.add_subcommand("reconstruct", "silhouettes, visual hull and optimized mesh of a session");
+  reconstruct_command->add_option("session", reconstruct.session, "session folder")->required();
+  reconstruct_command
+      ->add_option("--faces", reconstruct.options.mesh.target_faces, "faces of the optimized mesh")
+      ->capture_default_str();
+  reconstruct_command
+      ->add_option("--resolution", reconstruct.options.hull.resolution,
+                   "hull voxels along the object's longest side (0 = from --voxel-px)")
+      ->capture_default_str();
+  reconstruct_command
+      ->add_option("--voxel-px", reconstruct.options.hull.voxel_px,
+                   "hull voxel size in pixels of the sharpest view, when no --resolution")
+      ->capture_default_str();
+  reconstruct_command
+      ->add_option("--method", reconstruct.method,
+                   "silhouettes: key (backdrop colour) or difference (background plates in "
+                   "backgrounds/cam<C>.jpg)")
+      ->capture_default_str();
+  reconstruct_command
+      ->add_option("--plate-radius-m", reconstruct.options.silhouettes.plate_radius_m,
+                   "turntable plate radius to remove from the silhouettes (0 = none)")
+      ->capture_default_str();
+
   std::vector<CLI::App*> planned;
   for (const PlannedCommand& command : kPlannedCommands) {
     CLI::App* sub = app.add_subcommand(command.name, command.summary);
@@ -339,6 +385,7 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
     if (self_check_command->parsed()) return RunSelfCheckCommand(self_check, out, err);
     if (capture->parsed()) return RunSimCapture(sim_capture, out, err);
     if (import_command->parsed()) return RunImport(import_args, out, err);
+    if (reconstruct_command->parsed()) return RunReconstruct(reconstruct, out, err);
     err << "carousel: no subcommand\n";
     return kExitUsage;
   } catch (const std::exception& e) {

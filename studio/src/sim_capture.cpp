@@ -77,7 +77,7 @@ SimCaptureResult SimulateCapture(const SimCaptureOptions& options,
   const std::vector<CameraModel> rig = sim::MakeSimRig(options.rig, scene.Bounds());
   progress.EndStage();
 
-  for (const char* sub : {"images", "ground_truth/masks", "ground_truth/depth"}) {
+  for (const char* sub : {"images", "backgrounds", "ground_truth/masks", "ground_truth/depth"}) {
     folder.CreateFolder(sub);
   }
   const std::filesystem::path& staging = folder.staging();
@@ -98,6 +98,16 @@ SimCaptureResult SimulateCapture(const SimCaptureOptions& options,
   WriteMesh(scene.ToMesh(), staging / session.ground_truth.mesh);
 
   SimCaptureResult result;
+  // Background plates: each camera's photo of the empty turntable (the difference method).
+  for (int c = 0; c < static_cast<int>(rig.size()); ++c) {
+    sim::Scene empty;
+    empty.source = "empty turntable";
+    sim::RenderOptions render = options.render;
+    render.seed = options.render.seed * 7919ULL + 1000000ULL + static_cast<std::uint64_t>(c);
+    WriteImage(staging / ("backgrounds/cam" + std::to_string(c) + ".jpg"),
+               sim::Render(empty, rig[c], 0.0, render).image,
+               {.jpeg_quality = options.jpeg_quality, .overwrite = false});
+  }
   const int total = options.stops * static_cast<int>(rig.size());
   progress.BeginStage("render views");
   int done = 0;

@@ -1,4 +1,4 @@
-// recon: shape from silhouette (contract; issue 4 builds it).
+// recon: shape from silhouette. This header includes the three stages.
 //
 // Input: std::vector<View> (photo + camera), never a calibration file. Stages, each
 // `Result Stage(const Inputs&, const Options&, Progress&)`:
@@ -10,3 +10,7 @@
 //                 (default 4,500); closed, manifold, outward-oriented Mesh
 // recon never includes calib or texture.
 #pragma once
+
+#include "carousel/recon/mesh_optimization.h"
+#include "carousel/recon/silhouette.h"
+#include "carousel/recon/visual_hull.h"

@@ -2,13 +2,24 @@
 // against ground truth. All in the turntable frame, metres.
 #pragma once
 
+#include <string>
+
+#include "carousel/core/mesh.h"
 #include "carousel/sim/scene.h"
 
 namespace carousel::sim {
 
+// A mesh as a scene of one uniform colour (normals from the mesh), e.g. a procedural shape.
+Scene SceneFromMesh(const Mesh& mesh, const Eigen::Vector3f& color, const std::string& source);
+
 // A sphere (subdivided icosahedron, 20 * 4^subdivisions triangles) of uniform colour.
 Scene MakeSphereScene(double radius, const Eigen::Vector3d& centre, int subdivisions = 5,
                       const Eigen::Vector3f& color = {0.8f, 0.3f, 0.2f});
+
+// A torus lying on the table (about +Z, resting on z = 0): a shape with a concavity the
+// silhouettes cannot see into (the hole, seen from low elevations, and the saddle inside).
+Scene MakeRingScene(double major_radius, double minor_radius,
+                    const Eigen::Vector3f& color = {0.2f, 0.45f, 0.75f});
 
 // A square plate in the z = `height` plane, centred on the axis, `size` metres wide, with a
 // black-and-white checkerboard texture of `squares` x `squares` squares, `texels_per_square`

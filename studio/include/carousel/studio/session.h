@@ -2,6 +2,7 @@
 //
 //   <session>/session.json   this manifest, rewritten atomically (write, fsync, rename)
 //   <session>/images/        photos, never rewritten
+//   <session>/backgrounds/   cam<C>.jpg: camera C's photo of the empty turntable (optional)
 //   <session>/masks/ recon/ model/   later stages
 //   <session>/ground_truth/  simulated sessions only: exact masks, depth and scene mesh, kept
 //                            apart from what the pipeline reads

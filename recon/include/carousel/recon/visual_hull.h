@@ -1,0 +1,75 @@
+// Visual hull: the largest shape consistent with every silhouette (shape from silhouette, the
+// geometry the texture paper starts from).
+//
+// Octree carving: every cell is tested against every view at once through the view's signed
+// distance transform of the mask: if the cell's projected bounding circle lies entirely
+// outside the silhouette in one view the whole cell is empty; if it lies inside in all views
+// the cell is full; otherwise it is split, down to the finest voxel. Pixels outside a photo are
+// unknown, never empty: a view whose frame does not contain the whole object carves nothing
+// where it does not see.
+// Surface: the field f(x) = min over the views seeing x of the signed pixel distance of x's
+// projection to the silhouette boundary (bilinear, sub-pixel), scaled to metres by depth /
+// focal length, is evaluated at the finest cells' corners and contoured at f = 0 by marching
+// tetrahedra (each cube split into the six Freudenthal tetrahedra: the marching-cubes variant
+// without ambiguous cases, so the surface is watertight and manifold by construction) with
+// linear interpolation, i.e. at sub-voxel accuracy. The largest closed component is kept.
+// Units: metres in the views' world frame (the turntable frame). Masks: >= 128 = object.
+#pragma once
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "carousel/core/mesh.h"
+#include "carousel/core/progress.h"
+#include "carousel/core/view.h"
+
+namespace carousel::recon {
+
+struct VisualHullOptions {
+  // Voxel edge length in metres; 0 = automatic (from `resolution`, else from `voxel_px`).
+  double voxel_size_m = 0.0;
+  // Voxels along the longest side of the object's bounding box; 0 = use voxel_px. 16..4096.
+  int resolution = 0;
+  // Automatic voxel size: a voxel at the object's centre spans this many pixels in the view
+  // with the finest sampling, > 0.
+  double voxel_px = 2.0;
+  // The object stands on a floor (the turntable top) at z = floor_z_m: nothing below it.
+  bool use_floor = true;
+  double floor_z_m = 0.0;
+  // A view is inconsistent (wrong calibration, wrong mask) when it keeps less than this
+  // fraction of the hull of all the other views, 0..1. Checked with 4 views or more.
+  double min_view_consistency = 0.5;
+  // Refuse resolutions whose surface would need more cells than this (memory guard).
+  std::size_t max_surface_cells = 40'000'000;
+  // Worker threads; 0 = one per hardware thread.
+  int threads = 0;
+  void Validate() const;
+};
+
+struct VisualHullResult {
+  Mesh mesh;                 // closed, manifold, outward (counter-clockwise) triangles
+  double voxel_size_m = 0.0;
+  Eigen::AlignedBox3d box;   // the carved region
+  Eigen::Vector3i grid{0, 0, 0};  // finest voxels along x, y, z
+  std::size_t surface_cells = 0;
+  std::size_t corners_evaluated = 0;
+  std::size_t components_dropped = 0;   // smaller pieces removed
+  std::size_t faces_dropped = 0;        // faces in those pieces
+  double volume_m3 = 0.0;
+  std::vector<double> view_consistency;  // per view, fraction of the others' hull it keeps
+  double seconds_distance = 0.0;
+  double seconds_carve = 0.0;
+  double seconds_surface = 0.0;
+};
+
+// \pre views carry masks (View::Mask()) and cameras in one world frame.
+// \throw InvalidArgument (fewer than 2 views, bad options, a mask of the wrong size),
+//        FormatError naming views whose silhouettes are empty or inconsistent with the others
+//        (the hull vanishes), IoError for unreadable masks, Cancelled.
+VisualHullResult ComputeVisualHull(const std::vector<View>& views,
+                                   const VisualHullOptions& options, Progress& progress);
+
+}  // namespace carousel::recon

@@ -1,0 +1,331 @@
+#include "carousel/recon/mesh_optimization.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <queue>
+#include <utility>
+#include <vector>
+
+#include <OpenMesh/Tools/Decimater/DecimaterT.hh>
+#include <OpenMesh/Tools/Decimater/ModAspectRatioT.hh>
+#include <OpenMesh/Tools/Decimater/ModNormalFlippingT.hh>
+#include <OpenMesh/Tools/Decimater/ModQuadricT.hh>
+
+#include "carousel/core/error.h"
+#include "carousel/core/logging.h"
+#include "carousel/core/mesh_query.h"
+#include "carousel/core/timer.h"
+#include "quadric_decimation.h"
+
+namespace carousel::recon {
+namespace {
+
+using Point = Mesh::Point;
+
+Point FaceNormalWith(const Point& a, const Point& b, const Point& c) {
+  return OpenMesh::cross(b - a, c - a);
+}
+
+// Would collapsing halfedge h (its from-vertex moves onto its to-vertex) flip or crush a face
+// that survives? Compares each surviving face's normal before and after.
+bool CollapseKeepsOrientation(const Mesh& mesh, Mesh::HalfedgeHandle h) {
+  const auto v0 = mesh.from_vertex_handle(h);
+  const auto v1 = mesh.to_vertex_handle(h);
+  const Point& target = mesh.point(v1);
+  for (const auto face : mesh.vf_range(v0)) {
+    Point p[3];
+    bool has_v1 = false;
+    int k = 0;
+    for (const auto v : mesh.fv_range(face)) {
+      if (v == v1) has_v1 = true;
+      p[k++] = mesh.point(v);
+    }
+    if (has_v1) continue;  // removed by the collapse
+    const Point before = FaceNormalWith(p[0], p[1], p[2]);
+    k = 0;
+    for (const auto v : mesh.fv_range(face)) {
+      if (v == v0) p[k] = target;
+      ++k;
+    }
+    const Point after = FaceNormalWith(p[0], p[1], p[2]);
+    const double nb = before.norm();
+    const double na = after.norm();
+    if (!(na > 0.0) || !(nb > 0.0)) return false;
+    if (OpenMesh::dot(before, after) < 0.5 * na * nb) return false;  // > 60 degrees
+  }
+  return true;
+}
+
+// Longest edge first (Rivara bisection): splitting arbitrary long edges can cascade without
+// end around the needle fans decimation leaves on flat regions; longest-first terminates.
+void SplitLongEdges(Mesh* mesh, double high) {
+  const double high_sq = high * high;
+  auto length_sq = [&](Mesh::EdgeHandle e) {
+    const auto h = mesh->halfedge_handle(e, 0);
+    return (mesh->point(mesh->to_vertex_handle(h)) - mesh->point(mesh->from_vertex_handle(h)))
+        .sqrnorm();
+  };
+  std::priority_queue<std::pair<double, int>> queue;
+  for (const auto e : mesh->edges())
+    if (const double l = length_sq(e); l > high_sq) queue.emplace(l, e.idx());
+  while (!queue.empty()) {
+    const auto [l, index] = queue.top();
+    queue.pop();
+    const Mesh::EdgeHandle e(index);
+    if (mesh->status(e).deleted() || length_sq(e) != l) continue;  // changed since queued
+    const auto h = mesh->halfedge_handle(e, 0);
+    const Point middle =
+        0.5 * (mesh->point(mesh->from_vertex_handle(h)) + mesh->point(mesh->to_vertex_handle(h)));
+    const auto v = mesh->add_vertex(middle);
+    mesh->split(e, v);
+    for (const auto edge : mesh->ve_range(v))
+      if (const double le = length_sq(edge); le > high_sq) queue.emplace(le, edge.idx());
+  }
+}
+
+void CollapseShortEdges(Mesh* mesh, double low, double high) {
+  const double low_sq = low * low;
+  const double high_sq = high * high;
+  for (std::size_t i = 0; i < mesh->n_edges(); ++i) {
+    const Mesh::EdgeHandle e(static_cast<int>(i));
+    if (mesh->status(e).deleted()) continue;
+    const auto h0 = mesh->halfedge_handle(e, 0);
+    const auto v0 = mesh->from_vertex_handle(h0);
+    const auto v1 = mesh->to_vertex_handle(h0);
+    if ((mesh->point(v1) - mesh->point(v0)).sqrnorm() >= low_sq) continue;
+    for (const auto h : {h0, mesh->halfedge_handle(e, 1)}) {
+      const auto from = mesh->from_vertex_handle(h);
+      const auto to = mesh->to_vertex_handle(h);
+      bool too_long = false;
+      for (const auto n : mesh->vv_range(from))
+        too_long = too_long || (mesh->point(n) - mesh->point(to)).sqrnorm() > high_sq;
+      if (too_long || !mesh->is_collapse_ok(h) || !CollapseKeepsOrientation(*mesh, h)) continue;
+      mesh->collapse(h);
+      break;
+    }
+  }
+  mesh->garbage_collection();
+}
+
+int Valence(const Mesh& mesh, Mesh::VertexHandle v) { return static_cast<int>(mesh.valence(v)); }
+
+void EqualizeValences(Mesh* mesh) {
+  for (const auto e : mesh->edges()) {
+    if (!mesh->is_flip_ok(e)) continue;
+    const auto h0 = mesh->halfedge_handle(e, 0);
+    const auto h1 = mesh->halfedge_handle(e, 1);
+    const auto a = mesh->to_vertex_handle(h0);
+    const auto b = mesh->to_vertex_handle(h1);
+    const auto c = mesh->to_vertex_handle(mesh->next_halfedge_handle(h0));
+    const auto d = mesh->to_vertex_handle(mesh->next_halfedge_handle(h1));
+    const int before = std::abs(Valence(*mesh, a) - 6) + std::abs(Valence(*mesh, b) - 6) +
+                       std::abs(Valence(*mesh, c) - 6) + std::abs(Valence(*mesh, d) - 6);
+    const int after = std::abs(Valence(*mesh, a) - 7) + std::abs(Valence(*mesh, b) - 7) +
+                      std::abs(Valence(*mesh, c) - 5) + std::abs(Valence(*mesh, d) - 5);
+    if (after >= before) continue;
+    // Geometry: the two new triangles (c, d, ...) must face the way the old ones did.
+    const Point pa = mesh->point(a), pb = mesh->point(b), pc = mesh->point(c), pd = mesh->point(d);
+    // Old faces: (b, a, c)... use the face normals of the two adjacent faces.
+    const Point n_old = FaceNormalWith(pb, pa, pc) + FaceNormalWith(pa, pb, pd);
+    const Point n1 = FaceNormalWith(pc, pd, pa);
+    const Point n2 = FaceNormalWith(pd, pc, pb);
+    if (OpenMesh::dot(n1, n_old) <= 0.0 || OpenMesh::dot(n2, n_old) <= 0.0 ||
+        OpenMesh::dot(n1, n2) <= 0.0)
+      continue;
+    mesh->flip(e);
+  }
+}
+
+void TangentialRelaxation(Mesh* mesh) {
+  mesh->update_face_normals();
+  mesh->update_vertex_normals();
+  std::vector<Point> moved(mesh->n_vertices());
+  for (const auto v : mesh->vertices()) {
+    Point centroid(0.0, 0.0, 0.0);
+    int n = 0;
+    for (const auto w : mesh->vv_range(v)) {
+      centroid += mesh->point(w);
+      ++n;
+    }
+    const Point p = mesh->point(v);
+    if (n == 0) {
+      moved[v.idx()] = p;
+      continue;
+    }
+    centroid /= n;
+    const Point normal = mesh->normal(v);
+    moved[v.idx()] = centroid + normal * OpenMesh::dot(normal, p - centroid);
+  }
+  for (const auto v : mesh->vertices()) mesh->set_point(v, moved[v.idx()]);
+}
+
+void RequireClosedManifold(const Mesh& mesh, const char* what) {
+  const MeshTopology topology = AnalyzeTopology(mesh);
+  CAROUSEL_THROW_IF(topology.faces == 0, InvalidArgument, what << " has no faces");
+  CAROUSEL_THROW_IF(!topology.closed(), InvalidArgument,
+                    what << " is not closed (" << topology.boundary_edges << " boundary edges)");
+  CAROUSEL_THROW_IF(!topology.manifold(), InvalidArgument,
+                    what << " is not manifold (" << topology.non_manifold_vertices
+                         << " non-manifold vertices)");
+}
+
+// Collapses edges far shorter than the mean (coincident vertices, zero-area triangles): the
+// quadric and normal computations need triangles with an area.
+void CollapseDegenerateEdges(Mesh* mesh) {
+  double total = 0.0;
+  std::size_t n = 0;
+  for (const auto e : mesh->edges()) {
+    total += mesh->calc_edge_length(e);
+    ++n;
+  }
+  if (n == 0) return;
+  const double tiny = 1e-4 * total / static_cast<double>(n);
+  std::size_t collapsed = 0;
+  for (const auto e : mesh->edges()) {
+    if (mesh->status(e).deleted() || mesh->calc_edge_length(e) >= tiny) continue;
+    for (const auto h : {mesh->halfedge_handle(e, 0), mesh->halfedge_handle(e, 1)}) {
+      if (!mesh->is_collapse_ok(h)) continue;
+      mesh->collapse(h);
+      ++collapsed;
+      break;
+    }
+  }
+  if (collapsed > 0) mesh->garbage_collection();
+}
+
+}  // namespace
+
+void MeshOptimizationOptions::Validate() const {
+  auto check = [](bool ok, const char* field, const char* rule) {
+    if (!ok)
+      throw InvalidArgument(std::string("MeshOptimizationOptions.") + field + " must be " + rule);
+  };
+  check(target_faces >= 100, "target_faces", ">= 100");
+  check(smoothing_iterations >= 0 && smoothing_iterations <= 200, "smoothing_iterations",
+        "in [0, 200]");
+  check(taubin_lambda > 0.0 && taubin_lambda < 1.0, "taubin_lambda", "in (0, 1)");
+  check(taubin_mu < -taubin_lambda && taubin_mu > -1.0, "taubin_mu", "in (-1, -taubin_lambda)");
+  check(remesh_iterations >= 1 && remesh_iterations <= 20, "remesh_iterations", "in [1, 20]");
+  check(remesh_face_factor >= 1.0 && remesh_face_factor <= 10.0, "remesh_face_factor",
+        "in [1, 10]");
+  check(max_normal_deviation_deg > 0.0 && max_normal_deviation_deg <= 180.0,
+        "max_normal_deviation_deg", "in (0, 180]");
+  check(max_aspect_ratio > 1.0 && std::isfinite(max_aspect_ratio), "max_aspect_ratio", "> 1");
+}
+
+void TaubinSmooth(Mesh* mesh, int iterations, double lambda, double mu) {
+  std::vector<Point> laplacian(mesh->n_vertices());
+  auto step = [&](double factor) {
+    for (const auto v : mesh->vertices()) {
+      Point sum(0.0, 0.0, 0.0);
+      int n = 0;
+      for (const auto w : mesh->vv_range(v)) {
+        sum += mesh->point(w);
+        ++n;
+      }
+      laplacian[v.idx()] = n > 0 ? sum / n - mesh->point(v) : Point(0.0, 0.0, 0.0);
+    }
+    for (const auto v : mesh->vertices())
+      mesh->set_point(v, mesh->point(v) + factor * laplacian[v.idx()]);
+  };
+  for (int i = 0; i < iterations; ++i) {
+    step(lambda);
+    step(mu);
+  }
+}
+
+std::size_t DecimateQuadric(Mesh* mesh, std::size_t target_faces, double max_normal_deviation_deg,
+                            double max_aspect_ratio) {
+  if (mesh->n_faces() <= target_faces) return mesh->n_faces();
+  mesh->update_face_normals();
+  {
+    OpenMesh::Decimater::DecimaterT<Mesh> decimater(*mesh);
+    OpenMesh::Decimater::ModQuadricT<Mesh>::Handle quadric;
+    OpenMesh::Decimater::ModNormalFlippingT<Mesh>::Handle flipping;
+    OpenMesh::Decimater::ModAspectRatioT<Mesh>::Handle aspect;
+    decimater.add(quadric);
+    decimater.module(quadric).unset_max_err();
+    decimater.add(flipping);
+    decimater.module(flipping).set_max_normal_deviation(max_normal_deviation_deg);
+    decimater.add(aspect);
+    decimater.module(aspect).set_aspect_ratio(static_cast<float>(max_aspect_ratio));
+    decimater.module(aspect).set_binary(true);
+    CAROUSEL_CHECK(decimater.initialize(), "OpenMesh decimater did not initialise");
+    decimater.decimate_to_faces(0, target_faces);
+  }
+  mesh->garbage_collection();
+  return mesh->n_faces();
+}
+
+void RemeshIsotropic(Mesh* mesh, double edge_length, int iterations) {
+  const double high = 4.0 / 3.0 * edge_length;
+  const double low = 4.0 / 5.0 * edge_length;
+  for (int i = 0; i < iterations; ++i) {
+    SplitLongEdges(mesh, high);
+    CollapseShortEdges(mesh, low, high);
+    EqualizeValences(mesh);
+    TangentialRelaxation(mesh);
+  }
+}
+
+MeshOptimizationResult OptimizeMesh(const Mesh& hull, const MeshOptimizationOptions& options,
+                                    Progress& progress) {
+  options.Validate();
+  RequireClosedManifold(hull, "the input mesh");
+  MeshOptimizationResult result;
+  result.input_faces = hull.n_faces();
+  result.input_volume_m3 = SignedVolume(hull);
+  Mesh mesh = hull;
+  const auto target = static_cast<std::size_t>(options.target_faces);
+  Stopwatch stopwatch;
+
+  progress.BeginStage("mesh: smoothing");
+  CollapseDegenerateEdges(&mesh);
+  TaubinSmooth(&mesh, options.smoothing_iterations, options.taubin_lambda, options.taubin_mu);
+  progress.EndStage();
+  result.seconds_smooth = stopwatch.ElapsedSeconds();
+
+  if (options.remesh) {
+    progress.BeginStage("mesh: remeshing");
+    stopwatch.Restart();
+    const auto intermediate =
+        static_cast<std::size_t>(4.0 * options.remesh_face_factor * options.target_faces);
+    if (mesh.n_faces() > intermediate) {
+      internal::IndexedMesh indexed = internal::ToIndexed(mesh);
+      internal::DecimateIndexed(&indexed, intermediate, options.max_normal_deviation_deg,
+                                options.max_aspect_ratio);
+      mesh = internal::FromIndexed(indexed);
+    }
+    result.seconds_decimate += stopwatch.ElapsedSeconds();
+    progress.Report(0.3);
+    stopwatch.Restart();
+    // Equilateral triangles of edge L have area sqrt(3)/4 L^2.
+    const double faces = options.remesh_face_factor * options.target_faces;
+    const double edge = std::sqrt(4.0 * mesh.SurfaceArea() / (std::sqrt(3.0) * faces));
+    RemeshIsotropic(&mesh, edge, options.remesh_iterations);
+    result.seconds_remesh = stopwatch.ElapsedSeconds();
+    progress.EndStage();
+  }
+
+  progress.BeginStage("mesh: decimation");
+  stopwatch.Restart();
+  std::size_t faces = DecimateQuadric(&mesh, target, options.max_normal_deviation_deg,
+                                      options.max_aspect_ratio);
+  if (faces > target + target / 100) {
+    // The guards blocked the last collapses: relax the aspect guard, then the normal guard.
+    CAROUSEL_LOG_INFO("mesh: decimation stopped at " << faces << " faces; relaxing the guards");
+    faces = DecimateQuadric(&mesh, target, std::min(90.0, 1.5 * options.max_normal_deviation_deg),
+                            4.0 * options.max_aspect_ratio);
+  }
+  result.seconds_decimate += stopwatch.ElapsedSeconds();
+  progress.EndStage();
+  mesh.RecomputeNormals();
+  RequireClosedManifold(mesh, "the optimized mesh");
+  result.volume_m3 = SignedVolume(mesh);
+  CAROUSEL_CHECK(result.volume_m3 > 0.0, "optimized mesh is inside out");
+  result.mesh = std::move(mesh);
+  return result;
+}
+
+}  // namespace carousel::recon

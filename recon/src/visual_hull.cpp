@@ -1,0 +1,698 @@
+#include "carousel/recon/visual_hull.h"
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <numeric>
+#include <sstream>
+
+#include <opencv2/imgproc.hpp>
+
+#include "carousel/core/error.h"
+#include "carousel/core/logging.h"
+#include "carousel/core/mesh_query.h"
+#include "carousel/core/parallel.h"
+#include "carousel/core/timer.h"
+
+namespace carousel::recon {
+namespace {
+
+constexpr double kNearM = 1e-3;        // points closer to a camera are not projected
+constexpr double kFootprintSlack = 1.2;  // projected-radius safety factor (lens distortion)
+constexpr int kRootCells = 32;         // root grid cells along the longest side, at most
+constexpr int kConsistencyGrid = 48;   // points per axis for the consistency check
+
+// Signed distance to the silhouette boundary in pixels, positive inside, over a crop of the
+// image around the silhouette; outside the crop a lower bound of the true (negative) distance.
+class DistanceMap {
+ public:
+  DistanceMap(const cv::Mat& mask, const std::string& name) {
+    width_ = mask.cols;
+    height_ = mask.rows;
+    cv::Mat object = mask >= 128;
+    const cv::Rect box = cv::boundingRect(object);
+    if (box.area() == 0) throw InvalidArgument(name + ": silhouette is empty");
+    margin_ = std::max(32, std::max(box.width, box.height) / 4);
+    crop_ = cv::Rect(box.x - margin_, box.y - margin_, box.width + 2 * margin_,
+                     box.height + 2 * margin_) &
+            cv::Rect(0, 0, width_, height_);
+    const cv::Mat inside = object(crop_);
+    const cv::Mat outside = ~inside;
+    cv::Mat d_in, d_out;
+    cv::distanceTransform(inside, d_in, cv::DIST_L2, cv::DIST_MASK_PRECISE, CV_32F);
+    cv::distanceTransform(outside, d_out, cv::DIST_L2, cv::DIST_MASK_PRECISE, CV_32F);
+    sd_.create(crop_.size(), CV_32F);
+    for (int y = 0; y < crop_.height; ++y) {
+      const auto* in = inside.ptr<std::uint8_t>(y);
+      const auto* di = d_in.ptr<float>(y);
+      const auto* dout = d_out.ptr<float>(y);
+      auto* s = sd_.ptr<float>(y);
+      for (int x = 0; x < crop_.width; ++x) s[x] = in[x] ? di[x] - 0.5f : 0.5f - dout[x];
+    }
+    full_ = cv::countNonZero(object) == object.rows * object.cols;
+  }
+
+  int width() const { return width_; }
+  int height() const { return height_; }
+  bool full() const { return full_; }
+
+  // Whether a pixel position lies on the photo (pixel centres at integers).
+  bool InImage(double x, double y, double margin = 0.0) const {
+    return x >= -0.5 + margin && y >= -0.5 + margin && x <= width_ - 0.5 - margin &&
+           y <= height_ - 0.5 - margin;
+  }
+
+  // Bilinear signed distance at a pixel position. \pre InImage(x, y).
+  double At(double x, double y) const {
+    const double cx = x - crop_.x;
+    const double cy = y - crop_.y;
+    const double max_x = crop_.width - 1;
+    const double max_y = crop_.height - 1;
+    if (cx < 0.0 || cy < 0.0 || cx > max_x || cy > max_y) {
+      // Outside the crop, the silhouette is at least margin_ + (distance to the crop) away.
+      const double dx = std::max({0.0, -cx, cx - max_x});
+      const double dy = std::max({0.0, -cy, cy - max_y});
+      const double outside = std::sqrt(dx * dx + dy * dy);
+      if (outside > 0.75) return -(margin_ + outside - 0.5);
+    }
+    const double px = std::clamp(cx, 0.0, max_x);
+    const double py = std::clamp(cy, 0.0, max_y);
+    const int x0 = std::min(static_cast<int>(px), crop_.width - 2 < 0 ? 0 : crop_.width - 2);
+    const int y0 = std::min(static_cast<int>(py), crop_.height - 2 < 0 ? 0 : crop_.height - 2);
+    const int x1 = std::min(x0 + 1, crop_.width - 1);
+    const int y1 = std::min(y0 + 1, crop_.height - 1);
+    const double wx = std::clamp(px - x0, 0.0, 1.0);
+    const double wy = std::clamp(py - y0, 0.0, 1.0);
+    const float* r0 = sd_.ptr<float>(y0);
+    const float* r1 = sd_.ptr<float>(y1);
+    return (1 - wy) * ((1 - wx) * r0[x0] + wx * r0[x1]) + wy * ((1 - wx) * r1[x0] + wx * r1[x1]);
+  }
+
+ private:
+  int width_ = 0;
+  int height_ = 0;
+  int margin_ = 0;
+  bool full_ = false;
+  cv::Rect crop_;
+  cv::Mat sd_;
+};
+
+struct ViewData {
+  const CameraModel* camera = nullptr;
+  Eigen::Matrix3d rotation;
+  Eigen::Vector3d translation;
+  double focal_max = 0.0;
+  double focal_mean = 0.0;
+  std::unique_ptr<DistanceMap> distance;
+};
+
+enum class CellClass { kOut, kIn, kAmbiguous };
+
+class Carver {
+ public:
+  explicit Carver(const std::vector<ViewData>& views) : views_(views) {}
+
+  // Decides a cube (centre, half edge) against all views.
+  CellClass Classify(const Eigen::Vector3d& centre, double half) const {
+    const double rho = half * std::sqrt(3.0);
+    bool seen = false;
+    bool ambiguous = false;
+    for (const ViewData& view : views_) {
+      const Eigen::Vector3d p = view.rotation * centre + view.translation;
+      if (p.z() - rho <= kNearM) {
+        ambiguous = true;
+        continue;
+      }
+      const Eigen::Vector2d pixel = view.camera->ProjectFromCam(p);
+      const double r = view.focal_max * rho / (p.z() - rho) * kFootprintSlack + 1.0;
+      const DistanceMap& dm = *view.distance;
+      if (!dm.InImage(pixel.x(), pixel.y(), -r)) continue;  // footprint off the photo: unknown
+      seen = true;
+      if (!dm.InImage(pixel.x(), pixel.y())) {
+        ambiguous = true;
+        continue;
+      }
+      const double sd = dm.At(pixel.x(), pixel.y());
+      if (sd < -r) {
+        if (dm.InImage(pixel.x(), pixel.y(), r)) return CellClass::kOut;
+        ambiguous = true;
+      } else if (sd <= r) {
+        ambiguous = true;
+      }
+    }
+    if (ambiguous) return CellClass::kAmbiguous;
+    return seen ? CellClass::kIn : CellClass::kOut;
+  }
+
+  // The hull's field at a point: metres, positive inside. `unseen` is returned when no view
+  // sees the point.
+  double Field(const Eigen::Vector3d& x, double unseen) const {
+    double best = std::numeric_limits<double>::infinity();
+    for (const ViewData& view : views_) {
+      const Eigen::Vector3d p = view.rotation * x + view.translation;
+      if (p.z() <= kNearM) continue;
+      const Eigen::Vector2d pixel = view.camera->ProjectFromCam(p);
+      const DistanceMap& dm = *view.distance;
+      if (!dm.InImage(pixel.x(), pixel.y())) continue;
+      best = std::min(best, dm.At(pixel.x(), pixel.y()) * p.z() / view.focal_mean);
+    }
+    return std::isfinite(best) ? best : unseen;
+  }
+
+  // Per view: +1 inside the silhouette, -1 outside, 0 off the photo.
+  int PointState(std::size_t v, const Eigen::Vector3d& x) const {
+    const ViewData& view = views_[v];
+    const Eigen::Vector3d p = view.rotation * x + view.translation;
+    if (p.z() <= kNearM) return 0;
+    const Eigen::Vector2d pixel = view.camera->ProjectFromCam(p);
+    if (!view.distance->InImage(pixel.x(), pixel.y())) return 0;
+    return view.distance->At(pixel.x(), pixel.y()) > 0.0 ? 1 : -1;
+  }
+
+ private:
+  const std::vector<ViewData>& views_;
+};
+
+// Least-squares point closest to a set of rays (origin, unit direction).
+Eigen::Vector3d ClosestPointToRays(const std::vector<Ray>& rays) {
+  Eigen::Matrix3d a = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d b = Eigen::Vector3d::Zero();
+  for (const Ray& ray : rays) {
+    const Eigen::Matrix3d m = Eigen::Matrix3d::Identity() - ray.direction * ray.direction.transpose();
+    a += m;
+    b += m * ray.origin;
+  }
+  return a.ldlt().solve(b);
+}
+
+// Where hull errors point: the folder of the silhouettes, or a description of in-memory masks.
+std::filesystem::path MasksLocation(const std::vector<View>& views) {
+  for (const View& view : views)
+    if (!view.mask_path().empty()) return view.mask_path().parent_path();
+  return "silhouettes (in memory)";
+}
+
+struct Vertex {
+  std::uint64_t key;
+  Eigen::Vector3d position;
+};
+
+// Cube corners: bit 0 = +x, bit 1 = +y, bit 2 = +z. The six Freudenthal tetrahedra share the
+// main diagonal 0-7; every edge goes from a corner to one with coordinates >= its own.
+constexpr std::array<std::array<int, 4>, 6> kTetrahedra = {{{0, 1, 3, 7},
+                                                             {0, 1, 5, 7},
+                                                             {0, 2, 3, 7},
+                                                             {0, 2, 6, 7},
+                                                             {0, 4, 5, 7},
+                                                             {0, 4, 6, 7}}};
+
+}  // namespace
+
+void VisualHullOptions::Validate() const {
+  auto check = [](bool ok, const char* field, const char* rule) {
+    if (!ok)
+      throw InvalidArgument(std::string("VisualHullOptions.") + field + " must be " + rule);
+  };
+  check(voxel_size_m >= 0.0 && std::isfinite(voxel_size_m), "voxel_size_m", ">= 0");
+  check(resolution == 0 || (resolution >= 16 && resolution <= 4096), "resolution",
+        "0 or in [16, 4096]");
+  check(voxel_px > 0.0 && std::isfinite(voxel_px), "voxel_px", "> 0");
+  check(std::isfinite(floor_z_m), "floor_z_m", "finite");
+  check(min_view_consistency >= 0.0 && min_view_consistency <= 1.0, "min_view_consistency",
+        "in [0, 1]");
+  check(max_surface_cells >= 1000, "max_surface_cells", ">= 1000");
+  check(threads >= 0, "threads", ">= 0");
+}
+
+VisualHullResult ComputeVisualHull(const std::vector<View>& views,
+                                   const VisualHullOptions& options, Progress& progress) {
+  options.Validate();
+  CAROUSEL_THROW_IF(views.size() < 2, InvalidArgument,
+                    "a visual hull needs at least 2 views (got " << views.size() << ")");
+  VisualHullResult result;
+  const int threads = ResolveThreadCount(options.threads);
+
+  // --- distance transforms of the silhouettes ------------------------------------------------
+  progress.BeginStage("visual hull: distance maps");
+  Stopwatch stopwatch;
+  std::vector<ViewData> data(views.size());
+  std::vector<std::string> empty_views;
+  std::mutex empty_mutex;
+  std::atomic<std::size_t> done{0};
+  ParallelFor(views.size(), 1, threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      progress.CheckCancelled();
+      const View& view = views[i];
+      CAROUSEL_THROW_IF(!view.HasMask(), InvalidArgument,
+                        view.name() << ": no silhouette (run the silhouette step first)");
+      view.camera().Validate();
+      const cv::Mat mask = view.Mask();
+      ViewData& d = data[i];
+      d.camera = &view.camera();
+      d.rotation = view.camera().cam_from_world.rotation;
+      d.translation = view.camera().cam_from_world.translation;
+      d.focal_max = std::max(view.camera().fx, view.camera().fy);
+      d.focal_mean = 0.5 * (view.camera().fx + view.camera().fy);
+      if (cv::countNonZero(mask >= 128) == 0) {
+        std::lock_guard<std::mutex> lock(empty_mutex);
+        empty_views.push_back(view.name());
+      } else {
+        d.distance = std::make_unique<DistanceMap>(mask, view.name());
+      }
+      progress.Report(++done, views.size());
+    }
+  });
+  if (!empty_views.empty()) {
+    std::sort(empty_views.begin(), empty_views.end());
+    std::ostringstream names;
+    for (std::size_t i = 0; i < empty_views.size(); ++i) names << (i ? ", " : "") << empty_views[i];
+    throw FormatError(MasksLocation(views),
+                      std::to_string(empty_views.size()) +
+                          " view(s) have an empty silhouette (the object is not seen): " +
+                          names.str());
+  }
+  progress.EndStage();
+  result.seconds_distance = stopwatch.ElapsedSeconds();
+  const Carver carver(data);
+
+  // --- the region to carve ---------------------------------------------------------------------
+  std::vector<Ray> rays;
+  double half_extent = 0.0;
+  for (std::size_t i = 0; i < views.size(); ++i) {
+    const cv::Mat object = views[i].Mask() >= 128;
+    const cv::Moments m = cv::moments(object, true);
+    const Eigen::Vector2d centroid(m.m10 / m.m00, m.m01 / m.m00);
+    const auto ray = views[i].camera().RayThrough(centroid);
+    CAROUSEL_CHECK(ray.has_value(), "no ray through the centroid of " << views[i].name());
+    rays.push_back(*ray);
+  }
+  const Eigen::Vector3d centre = ClosestPointToRays(rays);
+  for (std::size_t i = 0; i < views.size(); ++i) {
+    const cv::Mat object = views[i].Mask() >= 128;
+    const cv::Rect box = cv::boundingRect(object);
+    const CameraModel& camera = views[i].camera();
+    const Eigen::Vector3d p = camera.cam_from_world.rotation * centre + camera.cam_from_world.translation;
+    if (p.z() <= kNearM)
+      throw FormatError(MasksLocation(views),
+                        views[i].name() + ": the silhouettes' common centre lies behind this "
+                                          "camera; the views' calibration is inconsistent");
+    const auto c = camera.ProjectFromCam(p);
+    double extent_px = 0.0;
+    for (const auto& corner : {cv::Point2d(box.x, box.y), cv::Point2d(box.br().x, box.y),
+                               cv::Point2d(box.x, box.br().y), cv::Point2d(box.br())})
+      extent_px = std::max(extent_px, std::hypot(corner.x - c.x(), corner.y - c.y()));
+    half_extent = std::max(half_extent, 1.3 * extent_px * p.z() / data[i].focal_mean);
+    views[i].ReleasePixels();
+  }
+  Eigen::AlignedBox3d region(centre - Eigen::Vector3d::Constant(half_extent),
+                             centre + Eigen::Vector3d::Constant(half_extent));
+  if (options.use_floor) {
+    if (region.max().z() <= options.floor_z_m)
+      throw FormatError(MasksLocation(views),
+                        "the silhouettes meet below the floor (z = " +
+                            std::to_string(options.floor_z_m) +
+                            " m); the views' calibration does not match the rig");
+    region.min().z() = std::max(region.min().z(), options.floor_z_m);
+  }
+
+  // --- view consistency (coarse) and the object's bounding box ---------------------------------
+  progress.BeginStage("visual hull: carving");
+  stopwatch.Restart();
+  const std::size_t n_views = views.size();
+  const Eigen::Vector3d coarse_step = region.sizes() / kConsistencyGrid;
+  std::vector<std::size_t> others_hull(n_views, 0), kept(n_views, 0);
+  Eigen::AlignedBox3d object_box;
+  std::size_t hull_points = 0;
+  {
+    std::mutex merge;
+    ParallelFor(static_cast<std::size_t>(kConsistencyGrid), 1, threads,
+                [&](std::size_t begin, std::size_t end) {
+                  std::vector<std::size_t> local_others(n_views, 0), local_kept(n_views, 0);
+                  std::vector<int> state(n_views);
+                  Eigen::AlignedBox3d local_box;
+                  std::size_t local_points = 0;
+                  for (std::size_t k = begin; k < end; ++k) {
+                    for (int j = 0; j < kConsistencyGrid; ++j) {
+                      for (int i = 0; i < kConsistencyGrid; ++i) {
+                        const Eigen::Vector3d x =
+                            region.min() + coarse_step.cwiseProduct(Eigen::Vector3d(
+                                               i + 0.5, j + 0.5, static_cast<double>(k) + 0.5));
+                        int outside = 0;
+                        int seen = 0;
+                        std::size_t last_outside = 0;
+                        for (std::size_t v = 0; v < n_views; ++v) {
+                          state[v] = carver.PointState(v, x);
+                          if (state[v] < 0) {
+                            ++outside;
+                            last_outside = v;
+                          }
+                          if (state[v] != 0) ++seen;
+                        }
+                        if (seen == 0) continue;
+                        if (outside == 0) {
+                          ++local_points;
+                          local_box.extend(x);
+                          for (std::size_t v = 0; v < n_views; ++v) {
+                            ++local_others[v];
+                            ++local_kept[v];
+                          }
+                        } else if (outside == 1) {
+                          ++local_others[last_outside];
+                        }
+                      }
+                    }
+                  }
+                  std::lock_guard<std::mutex> lock(merge);
+                  for (std::size_t v = 0; v < n_views; ++v) {
+                    others_hull[v] += local_others[v];
+                    kept[v] += local_kept[v];
+                  }
+                  object_box.extend(local_box);
+                  hull_points += local_points;
+                });
+  }
+  result.view_consistency.resize(n_views, 1.0);
+  std::vector<std::size_t> inconsistent;
+  for (std::size_t v = 0; v < n_views; ++v) {
+    if (others_hull[v] > 0)
+      result.view_consistency[v] = static_cast<double>(kept[v]) / others_hull[v];
+    if (n_views >= 4 && result.view_consistency[v] < options.min_view_consistency)
+      inconsistent.push_back(v);
+  }
+  if (hull_points == 0 || !inconsistent.empty()) {
+    std::vector<std::size_t> order(n_views);
+    std::iota(order.begin(), order.end(), 0);
+    std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+      return result.view_consistency[a] < result.view_consistency[b];
+    });
+    if (inconsistent.empty()) inconsistent.assign(order.begin(), order.begin() + std::min<std::size_t>(3, n_views));
+    std::ostringstream message;
+    message << (hull_points == 0 ? "the visual hull vanishes: the silhouettes have no common volume"
+                                 : "the silhouettes do not agree")
+            << "; views inconsistent with the others (wrong camera pose or mask):";
+    for (std::size_t i = 0; i < inconsistent.size(); ++i) {
+      const std::size_t v = inconsistent[i];
+      message << (i ? ", " : " ") << views[v].name() << " (keeps "
+              << static_cast<int>(std::round(100.0 * result.view_consistency[v]))
+              << "% of the others' hull)";
+    }
+    throw FormatError(MasksLocation(views), message.str());
+  }
+  // Grow by a coarse cell (points are cell centres) and clamp to the region.
+  object_box.min() -= coarse_step;
+  object_box.max() += coarse_step;
+  object_box = object_box.intersection(region);
+
+  // --- voxel size and grid ---------------------------------------------------------------------
+  double voxel = options.voxel_size_m;
+  const double longest = object_box.sizes().maxCoeff();
+  if (voxel <= 0.0 && options.resolution > 0) voxel = longest / options.resolution;
+  if (voxel <= 0.0) {
+    double finest = std::numeric_limits<double>::infinity();  // metres per pixel
+    const Eigen::Vector3d middle = object_box.center();
+    for (const ViewData& d : data) {
+      const double z = (d.rotation * middle + d.translation).z();
+      if (z > kNearM) finest = std::min(finest, z / d.focal_max);
+    }
+    voxel = options.voxel_px * finest;
+  }
+  int levels = 0;
+  while (longest / (voxel * (1 << levels)) > kRootCells) ++levels;
+  const double root_size = voxel * (1 << levels);
+  Eigen::Vector3i roots;  // root cells per axis
+  for (int a = 0; a < 3; ++a)
+    roots[a] = std::max(1, static_cast<int>(std::ceil(object_box.sizes()[a] / root_size)));
+  const Eigen::Vector3d origin = object_box.center() - 0.5 * root_size * roots.cast<double>();
+  Eigen::Vector3d grid_origin = origin;
+  // Standing on the floor: the floor lies midway between two corner layers, so the bottom is
+  // contoured exactly at the floor, never through a corner.
+  const bool on_floor = options.use_floor && object_box.min().z() <= options.floor_z_m + voxel;
+  if (on_floor) {
+    grid_origin.z() = options.floor_z_m - 0.5 * voxel;
+    roots.z() = std::max(
+        1, static_cast<int>(std::ceil((object_box.max().z() - grid_origin.z()) / root_size)));
+  }
+  result.voxel_size_m = voxel;
+  result.grid = roots * (1 << levels);
+  result.box = Eigen::AlignedBox3d(grid_origin, grid_origin + voxel * result.grid.cast<double>());
+  CAROUSEL_LOG_INFO("visual hull: voxel " << voxel * 1e3 << " mm, grid " << result.grid.x() << "x"
+                                           << result.grid.y() << "x" << result.grid.z() << ", "
+                                           << levels + 1 << " octree levels");
+
+  // --- octree carving, level by level ----------------------------------------------------------
+  using Cell = Eigen::Vector3i;
+  std::vector<Cell> cells;
+  for (int k = 0; k < roots.z(); ++k)
+    for (int j = 0; j < roots.y(); ++j)
+      for (int i = 0; i < roots.x(); ++i) cells.emplace_back(i, j, k);
+  std::vector<Cell> surface;
+  for (int level = levels; level >= 0; --level) {
+    const double size = voxel * (1 << level);
+    std::vector<std::uint8_t> decision(cells.size());
+    ParallelFor(cells.size(), 4096, threads, [&](std::size_t begin, std::size_t end) {
+      progress.CheckCancelled();
+      for (std::size_t c = begin; c < end; ++c) {
+        const Eigen::Vector3d centre_c = grid_origin + size * (cells[c].cast<double>() +
+                                                               Eigen::Vector3d::Constant(0.5));
+        CellClass decided = carver.Classify(centre_c, 0.5 * size);
+        // Cells on the grid's border are never full: the surface must close there.
+        const Eigen::Vector3i low = cells[c] * (1 << level);
+        const Eigen::Vector3i high = low + Eigen::Vector3i::Constant(1 << level);
+        if (decided == CellClass::kIn &&
+            ((low.array() == 0).any() || (high.array() >= result.grid.array()).any()))
+          decided = CellClass::kAmbiguous;
+        decision[c] = static_cast<std::uint8_t>(decided);
+      }
+    });
+    std::vector<Cell> next;
+    for (std::size_t c = 0; c < cells.size(); ++c) {
+      if (decision[c] != static_cast<std::uint8_t>(CellClass::kAmbiguous)) continue;
+      if (level == 0) {
+        surface.push_back(cells[c]);
+        continue;
+      }
+      for (int d = 0; d < 8; ++d)
+        next.emplace_back(2 * cells[c].x() + (d & 1), 2 * cells[c].y() + ((d >> 1) & 1),
+                          2 * cells[c].z() + ((d >> 2) & 1));
+    }
+    CAROUSEL_THROW_IF(next.size() > 8 * options.max_surface_cells ||
+                          surface.size() > options.max_surface_cells,
+                      InvalidArgument,
+                      "the visual hull at " << voxel * 1e3 << " mm voxels needs more than "
+                                            << options.max_surface_cells
+                                            << " surface cells; choose a coarser resolution");
+    cells.swap(next);
+    progress.Report(static_cast<double>(levels - level + 1) / (levels + 1));
+  }
+  result.surface_cells = surface.size();
+  progress.EndStage();
+  result.seconds_carve = stopwatch.ElapsedSeconds();
+
+  // --- the surface: field at the corners, marching tetrahedra ----------------------------------
+  progress.BeginStage("visual hull: surface");
+  stopwatch.Restart();
+  const std::uint64_t nx = static_cast<std::uint64_t>(result.grid.x()) + 1;
+  const std::uint64_t ny = static_cast<std::uint64_t>(result.grid.y()) + 1;
+  auto corner_key = [&](std::uint64_t i, std::uint64_t j, std::uint64_t k) {
+    return i + nx * (j + ny * k);
+  };
+  auto corner_position = [&](std::uint64_t key) {
+    const std::uint64_t i = key % nx;
+    const std::uint64_t j = (key / nx) % ny;
+    const std::uint64_t k = key / (nx * ny);
+    return Eigen::Vector3d(grid_origin + voxel * Eigen::Vector3d(static_cast<double>(i),
+                                                                 static_cast<double>(j),
+                                                                 static_cast<double>(k)));
+  };
+  std::vector<std::uint64_t> corners;
+  corners.reserve(surface.size() * 8);
+  for (const Cell& c : surface)
+    for (int d = 0; d < 8; ++d)
+      corners.push_back(corner_key(c.x() + (d & 1), c.y() + ((d >> 1) & 1), c.z() + ((d >> 2) & 1)));
+  std::sort(corners.begin(), corners.end());
+  corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
+  result.corners_evaluated = corners.size();
+  std::vector<double> field(corners.size());
+  ParallelFor(corners.size(), 8192, threads, [&](std::size_t begin, std::size_t end) {
+    progress.CheckCancelled();
+    for (std::size_t i = begin; i < end; ++i) {
+      const Eigen::Vector3d x = corner_position(corners[i]);
+      double f = carver.Field(x, -voxel);
+      // Closed at the grid's border (and at the floor, the grid's bottom when there is one).
+      f = std::min({f, (x - result.box.min()).minCoeff() - 0.5 * voxel,
+                    (result.box.max() - x).minCoeff() - 0.5 * voxel});
+      if (on_floor) f = std::min(f, x.z() - options.floor_z_m);
+      if (f == 0.0) f = -1e-9 * voxel;  // the zero set stays off the corners
+      field[i] = f;
+    }
+  });
+  progress.Report(0.5);
+  auto lookup = [&](std::uint64_t key) {
+    const auto it = std::lower_bound(corners.begin(), corners.end(), key);
+    return static_cast<std::size_t>(it - corners.begin());
+  };
+  // Triangles as edge keys (corner key * 8 + direction code); vertices are made per edge.
+  struct Chunk {
+    std::vector<std::array<std::uint64_t, 3>> triangles;
+    std::vector<Eigen::Vector3d> outward;
+    std::vector<Vertex> vertices;
+  };
+  const std::size_t chunk_size = 16384;
+  std::vector<Chunk> chunks((surface.size() + chunk_size - 1) / chunk_size);
+  ParallelFor(surface.size(), chunk_size, threads, [&](std::size_t begin, std::size_t end) {
+    progress.CheckCancelled();
+    Chunk& chunk = chunks[begin / chunk_size];
+    for (std::size_t s = begin; s < end; ++s) {
+      const Cell& c = surface[s];
+      std::array<std::uint64_t, 8> key{};
+      std::array<double, 8> value{};
+      std::array<Eigen::Vector3d, 8> position;
+      for (int d = 0; d < 8; ++d) {
+        key[d] = corner_key(c.x() + (d & 1), c.y() + ((d >> 1) & 1), c.z() + ((d >> 2) & 1));
+        value[d] = field[lookup(key[d])];
+        position[d] = corner_position(key[d]);
+      }
+      auto edge = [&](int a, int b) {
+        if (a > b) std::swap(a, b);  // corner b has coordinates >= corner a
+        const std::uint64_t code = static_cast<std::uint64_t>(b - a);  // 1..7, unique per offset
+        const std::uint64_t k = key[a] * 8 + code;
+        // Clamped away from the corners: no coincident vertices, no zero-area triangles.
+        const double t = std::clamp(value[a] / (value[a] - value[b]), 1e-3, 1.0 - 1e-3);
+        chunk.vertices.push_back({k, position[a] + t * (position[b] - position[a])});
+        return k;
+      };
+      auto emit = [&](std::uint64_t e0, std::uint64_t e1, std::uint64_t e2,
+                      const Eigen::Vector3d& inside, const Eigen::Vector3d& outside) {
+        // Orientation is fixed in the merge below, from the direction inside -> outside.
+        chunk.triangles.push_back({e0, e1, e2});
+        chunk.outward.push_back(outside - inside);
+      };
+      for (const auto& tet : kTetrahedra) {
+        std::array<int, 4> in{}, out{};
+        int n_in = 0;
+        int n_out = 0;
+        Eigen::Vector3d centre_in = Eigen::Vector3d::Zero();
+        Eigen::Vector3d centre_out = Eigen::Vector3d::Zero();
+        for (const int corner : tet) {
+          if (value[corner] > 0.0) {
+            in[n_in++] = corner;
+            centre_in += position[corner];
+          } else {
+            out[n_out++] = corner;
+            centre_out += position[corner];
+          }
+        }
+        if (n_in == 0 || n_out == 0) continue;
+        centre_in /= n_in;
+        centre_out /= n_out;
+        if (n_in == 1 || n_out == 1) {
+          const int apex = n_in == 1 ? in[0] : out[0];
+          const auto& others = n_in == 1 ? out : in;
+          const std::uint64_t e0 = edge(apex, others[0]);
+          const std::uint64_t e1 = edge(apex, others[1]);
+          const std::uint64_t e2 = edge(apex, others[2]);
+          emit(e0, e1, e2, centre_in, centre_out);
+        } else {
+          const std::uint64_t e0 = edge(in[0], out[0]);
+          const std::uint64_t e1 = edge(in[0], out[1]);
+          const std::uint64_t e2 = edge(in[1], out[1]);
+          const std::uint64_t e3 = edge(in[1], out[0]);
+          emit(e0, e1, e2, centre_in, centre_out);
+          emit(e0, e2, e3, centre_in, centre_out);
+        }
+      }
+    }
+  });
+  // Merge: unique vertices by edge key; triangles oriented so their normal points outwards.
+  std::vector<Vertex> vertices;
+  std::vector<std::array<std::uint64_t, 3>> triangle_keys;
+  std::vector<Eigen::Vector3d> outward;
+  for (Chunk& chunk : chunks) {
+    vertices.insert(vertices.end(), chunk.vertices.begin(), chunk.vertices.end());
+    triangle_keys.insert(triangle_keys.end(), chunk.triangles.begin(), chunk.triangles.end());
+    outward.insert(outward.end(), chunk.outward.begin(), chunk.outward.end());
+    chunk = Chunk();
+  }
+  std::sort(vertices.begin(), vertices.end(),
+            [](const Vertex& a, const Vertex& b) { return a.key < b.key; });
+  vertices.erase(std::unique(vertices.begin(), vertices.end(),
+                             [](const Vertex& a, const Vertex& b) { return a.key == b.key; }),
+                 vertices.end());
+  auto vertex_index = [&](std::uint64_t key) {
+    return static_cast<int>(std::lower_bound(vertices.begin(), vertices.end(), key,
+                                             [](const Vertex& v, std::uint64_t k) {
+                                               return v.key < k;
+                                             }) -
+                            vertices.begin());
+  };
+  std::vector<std::array<int, 3>> triangles(triangle_keys.size());
+  ParallelFor(triangles.size(), 65536, threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t t = begin; t < end; ++t) {
+      std::array<int, 3> tri{vertex_index(triangle_keys[t][0]), vertex_index(triangle_keys[t][1]),
+                             vertex_index(triangle_keys[t][2])};
+      const Eigen::Vector3d n = (vertices[tri[1]].position - vertices[tri[0]].position)
+                                    .cross(vertices[tri[2]].position - vertices[tri[0]].position);
+      if (n.dot(outward[t]) < 0.0) std::swap(tri[1], tri[2]);
+      triangles[t] = tri;
+    }
+  });
+  triangle_keys.clear();
+  progress.Report(0.8);
+
+  // Largest component (union-find over vertices), then the OpenMesh mesh.
+  std::vector<int> parent(vertices.size());
+  std::iota(parent.begin(), parent.end(), 0);
+  auto find = [&](int x) {
+    while (parent[x] != x) {
+      parent[x] = parent[parent[x]];
+      x = parent[x];
+    }
+    return x;
+  };
+  for (const auto& t : triangles) {
+    const int a = find(t[0]);
+    parent[find(t[1])] = a;
+    parent[find(t[2])] = a;
+  }
+  std::vector<std::size_t> faces_per_root(vertices.size(), 0);
+  for (const auto& t : triangles) ++faces_per_root[find(t[0])];
+  const auto largest =
+      std::max_element(faces_per_root.begin(), faces_per_root.end()) - faces_per_root.begin();
+  for (std::size_t r = 0; r < faces_per_root.size(); ++r)
+    if (faces_per_root[r] > 0 && static_cast<std::ptrdiff_t>(r) != largest) {
+      ++result.components_dropped;
+      result.faces_dropped += faces_per_root[r];
+    }
+  if (triangles.empty())
+    throw FormatError(MasksLocation(views), "the visual hull has no surface at " +
+                                                std::to_string(voxel * 1e3) +
+                                                " mm voxels (the object is thinner than a voxel)");
+  std::vector<int> remap(vertices.size(), -1);
+  Mesh& mesh = result.mesh;
+  for (const auto& t : triangles) {
+    if (find(t[0]) != largest) continue;
+    std::array<Mesh::VertexHandle, 3> handles;
+    for (int k = 0; k < 3; ++k) {
+      if (remap[t[k]] < 0) {
+        const auto& p = vertices[t[k]].position;
+        remap[t[k]] = mesh.add_vertex(Mesh::Point(p.x(), p.y(), p.z())).idx();
+      }
+      handles[k] = Mesh::VertexHandle(remap[t[k]]);
+    }
+    const auto face = mesh.add_face(handles[0], handles[1], handles[2]);
+    CAROUSEL_CHECK(face.is_valid(), "marching tetrahedra produced a non-manifold triangle");
+  }
+  mesh.RecomputeNormals();
+  result.volume_m3 = SignedVolume(mesh);
+  progress.EndStage();
+  result.seconds_surface = stopwatch.ElapsedSeconds();
+  if (result.components_dropped > 0)
+    CAROUSEL_LOG_INFO("visual hull: dropped " << result.components_dropped << " small pieces ("
+                                                << result.faces_dropped << " faces)");
+  return result;
+}
+
+}  // namespace carousel::recon

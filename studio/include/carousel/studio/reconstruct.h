@@ -1,0 +1,43 @@
+// `carousel reconstruct`: the reconstruction stage of a session folder (DESIGN.md):
+//   masks/<photo>.png   silhouettes, 8-bit, 255 = object (one per photo, same name)
+//   recon/hull.ply      the visual hull
+//   recon/mesh.ply      the optimized mesh
+// and session.json records the masks and the stage ("reconstruct": "done"). The photos are
+// only read. Each output is written atomically; the manifest last, once they are all on disk.
+// Sessions in the turntable frame stand on the floor z = 0 and have the plate removed; imported
+// datasets ("dataset" frame) have neither.
+// Background plates for the difference method: <session>/backgrounds/cam<C>.jpg (or .png), a
+// photo of the empty turntable by camera C.
+#pragma once
+
+#include <filesystem>
+#include <string>
+
+#include "carousel/core/progress.h"
+#include "carousel/recon/recon.h"
+
+namespace carousel::studio {
+
+struct ReconstructOptions {
+  recon::SilhouetteOptions silhouettes;
+  recon::VisualHullOptions hull;
+  recon::MeshOptimizationOptions mesh;
+  void Validate() const;
+};
+
+struct ReconstructResult {
+  int views = 0;
+  double min_mask_fraction = 0.0;  // smallest object fraction of a photo
+  std::size_t hull_faces = 0;
+  double voxel_size_m = 0.0;
+  std::size_t mesh_faces = 0;
+  double seconds_silhouettes = 0.0;
+  double seconds_hull = 0.0;
+  double seconds_mesh = 0.0;
+};
+
+// \throw IoError/FormatError naming the session file at fault, InvalidArgument, Cancelled.
+ReconstructResult ReconstructSession(const std::filesystem::path& session_folder,
+                                     const ReconstructOptions& options, Progress& progress);
+
+}  // namespace carousel::studio
