@@ -76,19 +76,32 @@ int main(int argc, char** argv) {
       }
       return std::string(argv[++i]);
     };
-    if (arg == "--scene") scene_name = next();
-    else if (arg == "--width") width = std::stoi(next());
-    else if (arg == "--height") height = std::stoi(next());
-    else if (arg == "--stops") stops = std::stoi(next());
-    else if (arg == "--voxel-px") voxel_px = std::stod(next());
-    else if (arg == "--resolution") resolution = std::stoi(next());
-    else if (arg == "--faces") faces = std::stoi(next());
-    else if (arg == "--method") method = next();
-    else if (arg == "--size-m") size_m = std::stod(next());
-    else if (arg == "--noise") noise = std::stod(next());
-    else if (arg == "--jpeg") jpeg = std::stoi(next());
-    else if (arg == "--truth-masks") truth_masks = true;
-    else if (arg == "--save") save = next();
+    if (arg == "--scene")
+      scene_name = next();
+    else if (arg == "--width")
+      width = std::stoi(next());
+    else if (arg == "--height")
+      height = std::stoi(next());
+    else if (arg == "--stops")
+      stops = std::stoi(next());
+    else if (arg == "--voxel-px")
+      voxel_px = std::stod(next());
+    else if (arg == "--resolution")
+      resolution = std::stoi(next());
+    else if (arg == "--faces")
+      faces = std::stoi(next());
+    else if (arg == "--method")
+      method = next();
+    else if (arg == "--size-m")
+      size_m = std::stod(next());
+    else if (arg == "--noise")
+      noise = std::stod(next());
+    else if (arg == "--jpeg")
+      jpeg = std::stoi(next());
+    else if (arg == "--truth-masks")
+      truth_masks = true;
+    else if (arg == "--save")
+      save = next();
     else {
       std::fprintf(stderr, "unknown argument %s\n", arg.c_str());
       return 64;
@@ -147,11 +160,12 @@ int main(int argc, char** argv) {
     const auto hull = recon::ComputeVisualHull(sim_views.views, hull_options, progress);
     const double hull_seconds = stage.ElapsedSeconds();
     const double voxel = hull.voxel_size_m;
-    std::printf("visual hull: %.2f s (distance %.2f, carve %.2f, surface %.2f); voxel %.3f mm, "
-                "grid %dx%dx%d, %zu surface cells, %zu faces, %zu pieces dropped\n",
-                hull_seconds, hull.seconds_distance, hull.seconds_carve, hull.seconds_surface,
-                voxel * 1e3, hull.grid.x(), hull.grid.y(), hull.grid.z(), hull.surface_cells,
-                hull.mesh.n_faces(), hull.components_dropped);
+    std::printf(
+        "visual hull: %.2f s (distance %.2f, carve %.2f, surface %.2f); voxel %.3f mm, "
+        "grid %dx%dx%d, %zu surface cells, %zu faces, %zu pieces dropped\n",
+        hull_seconds, hull.seconds_distance, hull.seconds_carve, hull.seconds_surface, voxel * 1e3,
+        hull.grid.x(), hull.grid.y(), hull.grid.z(), hull.surface_cells, hull.mesh.n_faces(),
+        hull.components_dropped);
 
     if (!save.empty()) WriteMesh(hull.mesh, std::filesystem::path(save) / "hull.ply");
     recon::MeshOptimizationOptions mesh_options;
@@ -159,28 +173,29 @@ int main(int argc, char** argv) {
     stage.Restart();
     const auto optimized = recon::OptimizeMesh(hull.mesh, mesh_options, progress);
     const double mesh_seconds = stage.ElapsedSeconds();
-    std::printf("mesh: %.2f s (smooth %.2f, decimate %.2f, remesh %.2f); %zu faces\n",
-                mesh_seconds, optimized.seconds_smooth, optimized.seconds_decimate,
-                optimized.seconds_remesh, optimized.mesh.n_faces());
+    std::printf("mesh: %.2f s (smooth %.2f, decimate %.2f, remesh %.2f); %zu faces\n", mesh_seconds,
+                optimized.seconds_smooth, optimized.seconds_decimate, optimized.seconds_remesh,
+                optimized.mesh.n_faces());
     std::printf("stage total (silhouettes + hull + mesh): %.2f s\n",
                 silhouette_seconds + hull_seconds + mesh_seconds);
 
     const auto truth_to_hull = MeasureSurfaceDistance(sim_views.truth_mesh, hull.mesh, 20000);
-    std::printf("hull vs truth: Chamfer %.3f mm, Hausdorff %.3f mm, truth->hull mean %.3f mm "
-                "(%.2f voxels), truth outside hull by at most %.3f mm (%.2f voxels)\n",
-                truth_to_hull.chamfer() * 1e3, truth_to_hull.hausdorff() * 1e3,
-                truth_to_hull.mean_a_to_b * 1e3, truth_to_hull.mean_a_to_b / voxel,
-                MaxOutside(sim_views.truth_mesh, hull.mesh, 20000) * 1e3,
-                MaxOutside(sim_views.truth_mesh, hull.mesh, 20000) / voxel);
+    std::printf(
+        "hull vs truth: Chamfer %.3f mm, Hausdorff %.3f mm, truth->hull mean %.3f mm "
+        "(%.2f voxels), truth outside hull by at most %.3f mm (%.2f voxels)\n",
+        truth_to_hull.chamfer() * 1e3, truth_to_hull.hausdorff() * 1e3,
+        truth_to_hull.mean_a_to_b * 1e3, truth_to_hull.mean_a_to_b / voxel,
+        MaxOutside(sim_views.truth_mesh, hull.mesh, 20000) * 1e3,
+        MaxOutside(sim_views.truth_mesh, hull.mesh, 20000) / voxel);
     const auto mesh_to_hull = MeasureSurfaceDistance(optimized.mesh, hull.mesh, 20000);
     const auto topology = AnalyzeTopology(optimized.mesh);
     const auto intersections = FindSelfIntersections(optimized.mesh, 10);
-    std::printf("optimized vs hull: mean %.3f mm (%.2f voxels), Hausdorff %.3f mm; volume %+.3f %%; "
-                "closed %d, manifold %d, components %zu, self-intersections %zu\n",
-                mesh_to_hull.mean_a_to_b * 1e3, mesh_to_hull.mean_a_to_b / voxel,
-                mesh_to_hull.hausdorff() * 1e3,
-                100.0 * (optimized.volume_m3 / hull.volume_m3 - 1.0), topology.closed(),
-                topology.manifold(), topology.components, intersections.size());
+    std::printf(
+        "optimized vs hull: mean %.3f mm (%.2f voxels), Hausdorff %.3f mm; volume %+.3f %%; "
+        "closed %d, manifold %d, components %zu, self-intersections %zu\n",
+        mesh_to_hull.mean_a_to_b * 1e3, mesh_to_hull.mean_a_to_b / voxel,
+        mesh_to_hull.hausdorff() * 1e3, 100.0 * (optimized.volume_m3 / hull.volume_m3 - 1.0),
+        topology.closed(), topology.manifold(), topology.components, intersections.size());
     const auto mesh_to_truth = MeasureSurfaceDistance(optimized.mesh, sim_views.truth_mesh, 20000);
     std::printf("optimized vs truth: Chamfer %.3f mm, Hausdorff %.3f mm\n",
                 mesh_to_truth.chamfer() * 1e3, mesh_to_truth.hausdorff() * 1e3);

@@ -97,8 +97,8 @@ TriangleTree::TriangleTree(const Mesh& mesh) : TriangleTree(TrianglesOf(mesh)) {
 
 TriangleTree::TriangleTree(std::vector<Triangle> triangles) : triangles_(std::move(triangles)) {
   CAROUSEL_THROW_IF(triangles_.size() >= std::numeric_limits<std::uint32_t>::max() / 2,
-                    InvalidArgument, "TriangleTree: too many triangles (" << triangles_.size()
-                                                                         << ")");
+                    InvalidArgument,
+                    "TriangleTree: too many triangles (" << triangles_.size() << ")");
   order_.resize(triangles_.size());
   std::iota(order_.begin(), order_.end(), 0U);
   if (!triangles_.empty()) {
@@ -302,8 +302,8 @@ MeshTopology AnalyzeTopology(const Mesh& mesh) {
       }
     }
   }
-  topology.euler_characteristic = static_cast<int>(topology.vertices) -
-                                  static_cast<int>(edges) + static_cast<int>(topology.faces);
+  topology.euler_characteristic = static_cast<int>(topology.vertices) - static_cast<int>(edges) +
+                                  static_cast<int>(topology.faces);
   return topology;
 }
 

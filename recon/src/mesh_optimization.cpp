@@ -165,9 +165,9 @@ void RequireClosedManifold(const Mesh& mesh, const char* what) {
   CAROUSEL_THROW_IF(topology.faces == 0, InvalidArgument, what << " has no faces");
   CAROUSEL_THROW_IF(!topology.closed(), InvalidArgument,
                     what << " is not closed (" << topology.boundary_edges << " boundary edges)");
-  CAROUSEL_THROW_IF(!topology.manifold(), InvalidArgument,
-                    what << " is not manifold (" << topology.non_manifold_vertices
-                         << " non-manifold vertices)");
+  CAROUSEL_THROW_IF(
+      !topology.manifold(), InvalidArgument,
+      what << " is not manifold (" << topology.non_manifold_vertices << " non-manifold vertices)");
 }
 
 // Collapses edges far shorter than the mean (coincident vertices, zero-area triangles): the
@@ -310,8 +310,8 @@ MeshOptimizationResult OptimizeMesh(const Mesh& hull, const MeshOptimizationOpti
 
   progress.BeginStage("mesh: decimation");
   stopwatch.Restart();
-  std::size_t faces = DecimateQuadric(&mesh, target, options.max_normal_deviation_deg,
-                                      options.max_aspect_ratio);
+  std::size_t faces =
+      DecimateQuadric(&mesh, target, options.max_normal_deviation_deg, options.max_aspect_ratio);
   if (faces > target + target / 100) {
     // The guards blocked the last collapses: relax the aspect guard, then the normal guard.
     CAROUSEL_LOG_INFO("mesh: decimation stopped at " << faces << " faces; relaxing the guards");
@@ -320,6 +320,15 @@ MeshOptimizationResult OptimizeMesh(const Mesh& hull, const MeshOptimizationOpti
   }
   result.seconds_decimate += stopwatch.ElapsedSeconds();
   progress.EndStage();
+  // Smoothing and decimation shrink curved parts slightly: offset the surface along its
+  // normals by the uniform distance that restores the hull's volume (dV = area * d).
+  for (int iteration = 0; iteration < 3; ++iteration) {
+    mesh.RecomputeNormals();
+    const double area = mesh.SurfaceArea();
+    const double offset = (result.input_volume_m3 - SignedVolume(mesh)) / area;
+    if (!(area > 0.0) || !std::isfinite(offset)) break;
+    for (const auto v : mesh.vertices()) mesh.set_point(v, mesh.point(v) + offset * mesh.normal(v));
+  }
   mesh.RecomputeNormals();
   RequireClosedManifold(mesh, "the optimized mesh");
   result.volume_m3 = SignedVolume(mesh);

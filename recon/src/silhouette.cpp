@@ -26,7 +26,9 @@ struct ColourModel {
   Eigen::Matrix<double, 6, 3> coeff = Eigen::Matrix<double, 6, 3>::Zero();
   double rms = 0.0;
 
-  static std::array<double, 6> Basis(double x, double y) { return {1.0, x, y, x * x, x * y, y * y}; }
+  static std::array<double, 6> Basis(double x, double y) {
+    return {1.0, x, y, x * x, x * y, y * y};
+  }
   cv::Vec3f At(double x, double y) const {
     const auto b = Basis(x, y);
     cv::Vec3f c;
@@ -74,7 +76,8 @@ bool FitColourModel(const std::vector<Sample>& samples, const std::vector<bool>&
       sum_sq += cv::norm(samples[i].colour - model->At(samples[i].x, samples[i].y), cv::NORM_L2SQR);
     }
     model->rms = std::sqrt(sum_sq / static_cast<double>(n));
-    const double limit = std::max(3.0 * model->rms, floor_levels);
+    // Noise widens the band, but never beyond a few times the floor: clutter is no backdrop.
+    const double limit = std::clamp(3.0 * model->rms, floor_levels, 2.5 * floor_levels);
     for (std::size_t i = 0; i < samples.size(); ++i)
       inlier[i] = cv::norm(samples[i].colour - model->At(samples[i].x, samples[i].y)) <= limit;
   }
@@ -191,8 +194,7 @@ const char* SilhouetteMethodName(SilhouetteMethod method) {
 
 void SilhouetteOptions::Validate() const {
   auto check = [](bool ok, const char* field, const char* rule) {
-    if (!ok)
-      throw InvalidArgument(std::string("SilhouetteOptions.") + field + " must be " + rule);
+    if (!ok) throw InvalidArgument(std::string("SilhouetteOptions.") + field + " must be " + rule);
   };
   check(noise_threshold >= 0.0 && std::isfinite(noise_threshold), "noise_threshold", ">= 0");
   check(chroma_threshold > 0.0 && std::isfinite(chroma_threshold), "chroma_threshold", "> 0");
@@ -224,9 +226,9 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
                               "the empty turntable by the same camera)");
     CAROUSEL_THROW_IF(background.type() != CV_8UC3 || background.size() != image.size(),
                       InvalidArgument,
-                      name << ": background plate is " << background.cols << "x"
-                           << background.rows << " and not an 8-bit BGR image like the photo ("
-                           << image.cols << "x" << image.rows << ")");
+                      name << ": background plate is " << background.cols << "x" << background.rows
+                           << " and not an 8-bit BGR image like the photo (" << image.cols << "x"
+                           << image.rows << ")");
   }
   const int width = image.cols;
   const int height = image.rows;
@@ -280,9 +282,10 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
     // A side of the border may be covered by the object: seed with the border, then let the
     // robust fit reject what does not agree.
     if (!FitColourModel(backdrop_samples, backdrop_seed, 6, floor, min_backdrop, &backdrop)) {
-      throw FormatError(name, "no backdrop to key against: fewer than 10% of the pixels around "
-                              "the object agree with a smooth backdrop colour (object filling "
-                              "the frame, or a cluttered background; use the difference method)");
+      throw FormatError(name,
+                        "no backdrop to key against: fewer than 10% of the pixels around "
+                        "the object agree with a smooth backdrop colour (object filling "
+                        "the frame, or a cluttered background; use the difference method)");
     }
     if (!plate_samples.empty()) {
       // Seed the plate fit with the pixels close to the median colour: the object may cover
@@ -293,8 +296,7 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
       cv::Vec3f median;
       for (int ch = 0; ch < 3; ++ch) {
         auto& v = channel[ch];
-        std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2),
-                         v.end());
+        std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
         median[ch] = v[v.size() / 2];
       }
       for (std::size_t i = 0; i < plate_samples.size(); ++i)
@@ -348,8 +350,8 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
 
   // --- boundary refinement: local alpha from the colour line between B and F ------------------
   if (options.refine_boundary && object_area > 0) {
-    constexpr int kBand = 2;     // pixels either side of the boundary
-    constexpr int kWindow = 9;   // neighbourhood for the object colour F
+    constexpr int kBand = 2;    // pixels either side of the boundary
+    constexpr int kWindow = 9;  // neighbourhood for the object colour F
     cv::Rect roi = cv::boundingRect(fg);
     roi.x -= kWindow + kBand;
     roi.y -= kWindow + kBand;

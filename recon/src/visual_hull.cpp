@@ -20,10 +20,10 @@
 namespace carousel::recon {
 namespace {
 
-constexpr double kNearM = 1e-3;        // points closer to a camera are not projected
+constexpr double kNearM = 1e-3;          // points closer to a camera are not projected
 constexpr double kFootprintSlack = 1.2;  // projected-radius safety factor (lens distortion)
-constexpr int kRootCells = 32;         // root grid cells along the longest side, at most
-constexpr int kConsistencyGrid = 48;   // points per axis for the consistency check
+constexpr int kRootCells = 32;           // root grid cells along the longest side, at most
+constexpr int kConsistencyGrid = 48;     // points per axis for the consistency check
 
 // Signed distance to the silhouette boundary in pixels, positive inside, over a crop of the
 // image around the silhouette; outside the crop a lower bound of the true (negative) distance.
@@ -181,7 +181,8 @@ Eigen::Vector3d ClosestPointToRays(const std::vector<Ray>& rays) {
   Eigen::Matrix3d a = Eigen::Matrix3d::Zero();
   Eigen::Vector3d b = Eigen::Vector3d::Zero();
   for (const Ray& ray : rays) {
-    const Eigen::Matrix3d m = Eigen::Matrix3d::Identity() - ray.direction * ray.direction.transpose();
+    const Eigen::Matrix3d m =
+        Eigen::Matrix3d::Identity() - ray.direction * ray.direction.transpose();
     a += m;
     b += m * ray.origin;
   }
@@ -202,19 +203,14 @@ struct Vertex {
 
 // Cube corners: bit 0 = +x, bit 1 = +y, bit 2 = +z. The six Freudenthal tetrahedra share the
 // main diagonal 0-7; every edge goes from a corner to one with coordinates >= its own.
-constexpr std::array<std::array<int, 4>, 6> kTetrahedra = {{{0, 1, 3, 7},
-                                                             {0, 1, 5, 7},
-                                                             {0, 2, 3, 7},
-                                                             {0, 2, 6, 7},
-                                                             {0, 4, 5, 7},
-                                                             {0, 4, 6, 7}}};
+constexpr std::array<std::array<int, 4>, 6> kTetrahedra = {
+    {{0, 1, 3, 7}, {0, 1, 5, 7}, {0, 2, 3, 7}, {0, 2, 6, 7}, {0, 4, 5, 7}, {0, 4, 6, 7}}};
 
 }  // namespace
 
 void VisualHullOptions::Validate() const {
   auto check = [](bool ok, const char* field, const char* rule) {
-    if (!ok)
-      throw InvalidArgument(std::string("VisualHullOptions.") + field + " must be " + rule);
+    if (!ok) throw InvalidArgument(std::string("VisualHullOptions.") + field + " must be " + rule);
   };
   check(voxel_size_m >= 0.0 && std::isfinite(voxel_size_m), "voxel_size_m", ">= 0");
   check(resolution == 0 || (resolution >= 16 && resolution <= 4096), "resolution",
@@ -227,8 +223,8 @@ void VisualHullOptions::Validate() const {
   check(threads >= 0, "threads", ">= 0");
 }
 
-VisualHullResult ComputeVisualHull(const std::vector<View>& views,
-                                   const VisualHullOptions& options, Progress& progress) {
+VisualHullResult ComputeVisualHull(const std::vector<View>& views, const VisualHullOptions& options,
+                                   Progress& progress) {
   options.Validate();
   CAROUSEL_THROW_IF(views.size() < 2, InvalidArgument,
                     "a visual hull needs at least 2 views (got " << views.size() << ")");
@@ -269,10 +265,10 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views,
     std::sort(empty_views.begin(), empty_views.end());
     std::ostringstream names;
     for (std::size_t i = 0; i < empty_views.size(); ++i) names << (i ? ", " : "") << empty_views[i];
-    throw FormatError(MasksLocation(views),
-                      std::to_string(empty_views.size()) +
-                          " view(s) have an empty silhouette (the object is not seen): " +
-                          names.str());
+    throw FormatError(
+        MasksLocation(views),
+        std::to_string(empty_views.size()) +
+            " view(s) have an empty silhouette (the object is not seen): " + names.str());
   }
   progress.EndStage();
   result.seconds_distance = stopwatch.ElapsedSeconds();
@@ -294,11 +290,13 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views,
     const cv::Mat object = views[i].Mask() >= 128;
     const cv::Rect box = cv::boundingRect(object);
     const CameraModel& camera = views[i].camera();
-    const Eigen::Vector3d p = camera.cam_from_world.rotation * centre + camera.cam_from_world.translation;
+    const Eigen::Vector3d p =
+        camera.cam_from_world.rotation * centre + camera.cam_from_world.translation;
     if (p.z() <= kNearM)
       throw FormatError(MasksLocation(views),
-                        views[i].name() + ": the silhouettes' common centre lies behind this "
-                                          "camera; the views' calibration is inconsistent");
+                        views[i].name() +
+                            ": the silhouettes' common centre lies behind this "
+                            "camera; the views' calibration is inconsistent");
     const auto c = camera.ProjectFromCam(p);
     double extent_px = 0.0;
     for (const auto& corner : {cv::Point2d(box.x, box.y), cv::Point2d(box.br().x, box.y),
@@ -311,10 +309,10 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views,
                              centre + Eigen::Vector3d::Constant(half_extent));
   if (options.use_floor) {
     if (region.max().z() <= options.floor_z_m)
-      throw FormatError(MasksLocation(views),
-                        "the silhouettes meet below the floor (z = " +
-                            std::to_string(options.floor_z_m) +
-                            " m); the views' calibration does not match the rig");
+      throw FormatError(
+          MasksLocation(views),
+          "the silhouettes meet below the floor (z = " + std::to_string(options.floor_z_m) +
+              " m); the views' calibration does not match the rig");
     region.min().z() = std::max(region.min().z(), options.floor_z_m);
   }
 
@@ -388,7 +386,8 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views,
     std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
       return result.view_consistency[a] < result.view_consistency[b];
     });
-    if (inconsistent.empty()) inconsistent.assign(order.begin(), order.begin() + std::min<std::size_t>(3, n_views));
+    if (inconsistent.empty())
+      inconsistent.assign(order.begin(), order.begin() + std::min<std::size_t>(3, n_views));
     std::ostringstream message;
     message << (hull_points == 0 ? "the visual hull vanishes: the silhouettes have no common volume"
                                  : "the silhouettes do not agree")
@@ -439,8 +438,8 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views,
   result.grid = roots * (1 << levels);
   result.box = Eigen::AlignedBox3d(grid_origin, grid_origin + voxel * result.grid.cast<double>());
   CAROUSEL_LOG_INFO("visual hull: voxel " << voxel * 1e3 << " mm, grid " << result.grid.x() << "x"
-                                           << result.grid.y() << "x" << result.grid.z() << ", "
-                                           << levels + 1 << " octree levels");
+                                          << result.grid.y() << "x" << result.grid.z() << ", "
+                                          << levels + 1 << " octree levels");
 
   // --- octree carving, level by level ----------------------------------------------------------
   using Cell = Eigen::Vector3i;
@@ -455,8 +454,8 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views,
     ParallelFor(cells.size(), 4096, threads, [&](std::size_t begin, std::size_t end) {
       progress.CheckCancelled();
       for (std::size_t c = begin; c < end; ++c) {
-        const Eigen::Vector3d centre_c = grid_origin + size * (cells[c].cast<double>() +
-                                                               Eigen::Vector3d::Constant(0.5));
+        const Eigen::Vector3d centre_c =
+            grid_origin + size * (cells[c].cast<double>() + Eigen::Vector3d::Constant(0.5));
         CellClass decided = carver.Classify(centre_c, 0.5 * size);
         // Cells on the grid's border are never full: the surface must close there.
         const Eigen::Vector3i low = cells[c] * (1 << level);
@@ -478,12 +477,12 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views,
         next.emplace_back(2 * cells[c].x() + (d & 1), 2 * cells[c].y() + ((d >> 1) & 1),
                           2 * cells[c].z() + ((d >> 2) & 1));
     }
-    CAROUSEL_THROW_IF(next.size() > 8 * options.max_surface_cells ||
-                          surface.size() > options.max_surface_cells,
-                      InvalidArgument,
-                      "the visual hull at " << voxel * 1e3 << " mm voxels needs more than "
-                                            << options.max_surface_cells
-                                            << " surface cells; choose a coarser resolution");
+    CAROUSEL_THROW_IF(
+        next.size() > 8 * options.max_surface_cells || surface.size() > options.max_surface_cells,
+        InvalidArgument,
+        "the visual hull at " << voxel * 1e3 << " mm voxels needs more than "
+                              << options.max_surface_cells
+                              << " surface cells; choose a coarser resolution");
     cells.swap(next);
     progress.Report(static_cast<double>(levels - level + 1) / (levels + 1));
   }
@@ -511,7 +510,8 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views,
   corners.reserve(surface.size() * 8);
   for (const Cell& c : surface)
     for (int d = 0; d < 8; ++d)
-      corners.push_back(corner_key(c.x() + (d & 1), c.y() + ((d >> 1) & 1), c.z() + ((d >> 2) & 1)));
+      corners.push_back(
+          corner_key(c.x() + (d & 1), c.y() + ((d >> 1) & 1), c.z() + ((d >> 2) & 1)));
   std::sort(corners.begin(), corners.end());
   corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
   result.corners_evaluated = corners.size();
@@ -622,11 +622,10 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views,
                              [](const Vertex& a, const Vertex& b) { return a.key == b.key; }),
                  vertices.end());
   auto vertex_index = [&](std::uint64_t key) {
-    return static_cast<int>(std::lower_bound(vertices.begin(), vertices.end(), key,
-                                             [](const Vertex& v, std::uint64_t k) {
-                                               return v.key < k;
-                                             }) -
-                            vertices.begin());
+    return static_cast<int>(
+        std::lower_bound(vertices.begin(), vertices.end(), key,
+                         [](const Vertex& v, std::uint64_t k) { return v.key < k; }) -
+        vertices.begin());
   };
   std::vector<std::array<int, 3>> triangles(triangle_keys.size());
   ParallelFor(triangles.size(), 65536, threads, [&](std::size_t begin, std::size_t end) {
@@ -691,7 +690,7 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views,
   result.seconds_surface = stopwatch.ElapsedSeconds();
   if (result.components_dropped > 0)
     CAROUSEL_LOG_INFO("visual hull: dropped " << result.components_dropped << " small pieces ("
-                                                << result.faces_dropped << " faces)");
+                                              << result.faces_dropped << " faces)");
   return result;
 }
 

@@ -28,9 +28,9 @@ class TriangleTree {
   explicit TriangleTree(const Mesh& mesh);
 
   struct Hit {
-    Eigen::Vector3d point;       // closest point on the surface
-    double distance = 0.0;       // to the query point
-    std::size_t triangle = 0;    // index into triangles()
+    Eigen::Vector3d point;     // closest point on the surface
+    double distance = 0.0;     // to the query point
+    std::size_t triangle = 0;  // index into triangles()
   };
   // The closest surface point to `query`. \pre !empty().
   Hit ClosestPoint(const Eigen::Vector3d& query) const;
@@ -74,9 +74,9 @@ struct MeshTopology {
   std::size_t boundary_edges = 0;         // edges with one face
   std::size_t non_manifold_vertices = 0;  // vertices whose faces form more than one fan
   std::size_t isolated_vertices = 0;
-  std::size_t components = 0;             // face-connected components
-  std::size_t degenerate_faces = 0;       // area below 1e-18 (m^2)
-  int euler_characteristic = 0;           // V - E + F
+  std::size_t components = 0;        // face-connected components
+  std::size_t degenerate_faces = 0;  // area below 1e-18 (m^2)
+  int euler_characteristic = 0;      // V - E + F
   bool closed() const { return boundary_edges == 0; }
   bool manifold() const { return non_manifold_vertices == 0; }
 };

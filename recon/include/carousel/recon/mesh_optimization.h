@@ -10,7 +10,8 @@
 //      `remesh_face_factor` x the target: well-shaped triangles for the final step.
 //   4. Quadric decimation to exactly `target_faces`, guarded against normal flips and
 //      needle triangles.
-// Every step keeps the mesh closed and manifold; the result is outward oriented.
+// Every step keeps the mesh closed and manifold; the result is outward oriented. Finally a
+// uniform offset along the normals (a fraction of a millimetre) restores the hull's volume.
 // Units: the mesh's own (metres).
 #pragma once
 
@@ -26,12 +27,12 @@ struct MeshOptimizationOptions {
   int target_faces = 4500;
   // Taubin lambda|mu pairs on the hull; 0 = no smoothing. 0..200.
   int smoothing_iterations = 8;
-  double taubin_lambda = 0.5;   // 0 < lambda < 1
-  double taubin_mu = -0.53;     // mu < -lambda: the pass-band stays, high frequencies go
+  double taubin_lambda = 0.5;  // 0 < lambda < 1
+  double taubin_mu = -0.53;    // mu < -lambda: the pass-band stays, high frequencies go
   // Isotropic remeshing before the final decimation.
   bool remesh = true;
-  int remesh_iterations = 5;          // 1..20
-  double remesh_face_factor = 2.0;    // remesh to about this x target_faces, >= 1
+  int remesh_iterations = 5;        // 1..20
+  double remesh_face_factor = 2.0;  // remesh to about this x target_faces, >= 1
   // Decimation guards: largest change of a face normal by one collapse, degrees (0..180],
   // and largest triangle aspect ratio (longest edge / its height) a collapse may create, > 1.
   double max_normal_deviation_deg = 60.0;

@@ -71,7 +71,7 @@ struct SilhouetteOptions {
 };
 
 struct SilhouetteStats {
-  double object_fraction = 0.0;  // mask area / image area
+  double object_fraction = 0.0;    // mask area / image area
   double backdrop_residual = 0.0;  // RMS of the fitted backdrop model on its inliers, levels
   int components = 0;              // object components kept
 };

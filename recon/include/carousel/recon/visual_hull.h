@@ -50,14 +50,14 @@ struct VisualHullOptions {
 };
 
 struct VisualHullResult {
-  Mesh mesh;                 // closed, manifold, outward (counter-clockwise) triangles
+  Mesh mesh;  // closed, manifold, outward (counter-clockwise) triangles
   double voxel_size_m = 0.0;
-  Eigen::AlignedBox3d box;   // the carved region
+  Eigen::AlignedBox3d box;        // the carved region
   Eigen::Vector3i grid{0, 0, 0};  // finest voxels along x, y, z
   std::size_t surface_cells = 0;
   std::size_t corners_evaluated = 0;
-  std::size_t components_dropped = 0;   // smaller pieces removed
-  std::size_t faces_dropped = 0;        // faces in those pieces
+  std::size_t components_dropped = 0;  // smaller pieces removed
+  std::size_t faces_dropped = 0;       // faces in those pieces
   double volume_m3 = 0.0;
   std::vector<double> view_consistency;  // per view, fraction of the others' hull it keeps
   double seconds_distance = 0.0;
@@ -69,7 +69,7 @@ struct VisualHullResult {
 // \throw InvalidArgument (fewer than 2 views, bad options, a mask of the wrong size),
 //        FormatError naming views whose silhouettes are empty or inconsistent with the others
 //        (the hull vanishes), IoError for unreadable masks, Cancelled.
-VisualHullResult ComputeVisualHull(const std::vector<View>& views,
-                                   const VisualHullOptions& options, Progress& progress);
+VisualHullResult ComputeVisualHull(const std::vector<View>& views, const VisualHullOptions& options,
+                                   Progress& progress);
 
 }  // namespace carousel::recon

@@ -17,18 +17,18 @@ namespace carousel::sim {
 
 struct SimViewsOptions {
   SimRigOptions rig;
-  int stops = 16;         // turntable stops, evenly spaced from 0 deg, >= 1
-  RenderOptions render;   // seed varies per view
-  int jpeg_quality = 95;  // photos go through JPEG at this quality; 0 = keep them lossless
+  int stops = 16;            // turntable stops, evenly spaced from 0 deg, >= 1
+  RenderOptions render;      // seed varies per view
+  int jpeg_quality = 95;     // photos go through JPEG at this quality; 0 = keep them lossless
   bool backgrounds = false;  // also render each camera's empty-turntable background plate
   void Validate() const;
 };
 
 struct SimViews {
-  std::vector<View> views;               // named camC_stopNN, pixels in memory, no masks
-  std::vector<cv::Mat> truth_masks;      // per view, exact silhouettes (CV_8UC1)
-  std::vector<cv::Mat> backgrounds;      // per view (shared per camera) when requested
-  Mesh truth_mesh;                       // the scene's surface, turntable frame
+  std::vector<View> views;           // named camC_stopNN, pixels in memory, no masks
+  std::vector<cv::Mat> truth_masks;  // per view, exact silhouettes (CV_8UC1)
+  std::vector<cv::Mat> backgrounds;  // per view (shared per camera) when requested
+  Mesh truth_mesh;                   // the scene's surface, turntable frame
 };
 
 // \throw InvalidArgument for bad options or scene.

@@ -1,0 +1,99 @@
+#include "carousel/recon/silhouette.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <opencv2/imgproc.hpp>
+
+#include "carousel/core/error.h"
+#include "carousel/testing/testing.h"
+#include "recon_fixtures.h"
+
+namespace carousel::recon {
+namespace {
+
+using ::testing::HasSubstr;
+
+class SilhouetteOnScene : public ::testing::TestWithParam<std::pair<std::string, SilhouetteMethod>> {
+};
+
+// The bound: IoU >= 0.99 against the exact silhouette on every view, with sensor noise
+// and JPEG, for keying and for background differencing; the plate never counts as object.
+TEST_P(SilhouetteOnScene, EveryViewMatchesTheTruth) {
+  const auto& [scene, method] = GetParam();
+  const sim::SimViews& capture = testing::SimulatedCapture(scene);
+  SilhouetteOptions options;
+  options.method = method;
+  Progress progress;
+  const SilhouettesResult result =
+      ComputeSilhouettes(capture.views, capture.backgrounds, options, progress);
+  ASSERT_EQ(result.masks.size(), capture.views.size());
+  for (std::size_t i = 0; i < capture.views.size(); ++i) {
+    const double iou = MaskIoU(result.masks[i], capture.truth_masks[i]);
+    EXPECT_GE(iou, 0.99) << capture.views[i].name();
+    EXPECT_GT(result.stats[i].object_fraction, 0.01);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Scenes, SilhouetteOnScene,
+    ::testing::Values(std::make_pair("shoe", SilhouetteMethod::kKey),
+                      std::make_pair("bottle", SilhouetteMethod::kKey),
+                      std::make_pair("ring", SilhouetteMethod::kKey),
+                      std::make_pair("shoe", SilhouetteMethod::kDifference),
+                      std::make_pair("bottle", SilhouetteMethod::kDifference)),
+    [](const auto& param_info) {
+      return param_info.param.first + "_" + SilhouetteMethodName(param_info.param.second);
+    });
+
+// A shadow darkens the backdrop beside the object: keying stays background there.
+TEST(SilhouetteTest, ShadowOnTheBackdropIsNotObject) {
+  const sim::SimViews& capture = testing::SimulatedCapture("bottle");
+  const View& view = capture.views[2];
+  cv::Mat image = view.Image().clone();
+  const cv::Mat& truth = capture.truth_masks[2];
+  const cv::Rect object = cv::boundingRect(truth);
+  // A soft-edged shadow of 65 % brightness to the right of the object.
+  cv::Mat shade(image.size(), CV_32F, cv::Scalar(1.0));
+  const cv::Point centre(std::min(image.cols - 40, object.br().x + object.width / 2),
+                         object.y + object.height / 2);
+  cv::ellipse(shade, centre, cv::Size(object.width / 2, object.height / 3), 0, 0, 360,
+              cv::Scalar(0.65), cv::FILLED);
+  cv::GaussianBlur(shade, shade, cv::Size(0, 0), 4.0);
+  cv::Mat shaded;
+  image.convertTo(shaded, CV_32FC3);
+  cv::Mat shade3;
+  cv::merge(std::vector<cv::Mat>{shade, shade, shade}, shade3);
+  cv::multiply(shaded, shade3, shaded);
+  shaded.convertTo(image, CV_8UC3);
+  const cv::Mat mask = ComputeSilhouette(image, view.camera(), {}, {}, view.name());
+  EXPECT_GE(MaskIoU(mask, truth), 0.985);
+  cv::Mat spill = (mask >= 128) & (truth < 128) & (shade < 0.95);
+  EXPECT_LT(cv::countNonZero(spill), 20);
+}
+
+TEST(SilhouetteTest, RejectsBadInput) {
+  const sim::SimViews& capture = testing::SimulatedCapture("bottle");
+  const View& view = capture.views[0];
+  SilhouetteOptions difference;
+  difference.method = SilhouetteMethod::kDifference;
+  CAROUSEL_EXPECT_THROW_WITH(ComputeSilhouette(view.Image(), view.camera(), difference, {}, "p1"),
+                             InvalidArgument, "p1: the difference method needs a background");
+  cv::Mat gray;
+  cv::cvtColor(view.Image(), gray, cv::COLOR_BGR2GRAY);
+  EXPECT_THROW(ComputeSilhouette(gray, view.camera(), {}), InvalidArgument);
+  // Random clutter: no backdrop to key against.
+  cv::Mat blocks(view.Image().rows / 48 + 1, view.Image().cols / 48 + 1, CV_8UC3);
+  cv::randu(blocks, cv::Scalar::all(0), cv::Scalar::all(255));
+  cv::Mat clutter;
+  cv::resize(blocks, clutter, cv::Size(), 48, 48, cv::INTER_NEAREST);
+  clutter = clutter(cv::Rect(0, 0, view.Image().cols, view.Image().rows)).clone();
+  CAROUSEL_EXPECT_THROW_WITH(ComputeSilhouette(clutter, view.camera(), {}, {}, "clutter.jpg"),
+                             FormatError, "no backdrop to key against");
+  SilhouetteOptions bad;
+  bad.chroma_threshold = 0.0;
+  CAROUSEL_EXPECT_THROW_WITH(bad.Validate(), InvalidArgument, "chroma_threshold");
+  EXPECT_THROW(ParseSilhouetteMethod("magic"), InvalidArgument);
+}
+
+}  // namespace
+}  // namespace carousel::recon
