@@ -13,8 +13,8 @@ namespace {
 
 using ::testing::HasSubstr;
 
-class SilhouetteOnScene : public ::testing::TestWithParam<std::pair<std::string, SilhouetteMethod>> {
-};
+class SilhouetteOnScene
+    : public ::testing::TestWithParam<std::pair<std::string, SilhouetteMethod>> {};
 
 // The bound: IoU >= 0.99 against the exact silhouette on every view, with sensor noise
 // and JPEG, for keying and for background differencing; the plate never counts as object.
@@ -34,16 +34,16 @@ TEST_P(SilhouetteOnScene, EveryViewMatchesTheTruth) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Scenes, SilhouetteOnScene,
-    ::testing::Values(std::make_pair("shoe", SilhouetteMethod::kKey),
-                      std::make_pair("bottle", SilhouetteMethod::kKey),
-                      std::make_pair("ring", SilhouetteMethod::kKey),
-                      std::make_pair("shoe", SilhouetteMethod::kDifference),
-                      std::make_pair("bottle", SilhouetteMethod::kDifference)),
-    [](const auto& param_info) {
-      return param_info.param.first + "_" + SilhouetteMethodName(param_info.param.second);
-    });
+INSTANTIATE_TEST_SUITE_P(Scenes, SilhouetteOnScene,
+                         ::testing::Values(std::make_pair("shoe", SilhouetteMethod::kKey),
+                                           std::make_pair("bottle", SilhouetteMethod::kKey),
+                                           std::make_pair("ring", SilhouetteMethod::kKey),
+                                           std::make_pair("shoe", SilhouetteMethod::kDifference),
+                                           std::make_pair("bottle", SilhouetteMethod::kDifference)),
+                         [](const auto& param_info) {
+                           return param_info.param.first + "_" +
+                                  SilhouetteMethodName(param_info.param.second);
+                         });
 
 // A shadow darkens the backdrop beside the object: keying stays background there.
 TEST(SilhouetteTest, ShadowOnTheBackdropIsNotObject) {

@@ -181,7 +181,8 @@ TEST(MeshOptimizationTest, RefusesOpenMeshesAndKeepsTopology) {
                              "not closed");
   MeshOptimizationOptions options;
   options.target_faces = 600;
-  const MeshOptimizationResult torus = OptimizeMesh(MakeTorus(0.1, 0.03, 96, 48), options, progress);
+  const MeshOptimizationResult torus =
+      OptimizeMesh(MakeTorus(0.1, 0.03, 96, 48), options, progress);
   EXPECT_NEAR(static_cast<double>(torus.mesh.n_faces()), 600.0, 6.0);
   EXPECT_EQ(AnalyzeTopology(torus.mesh).euler_characteristic, 0);  // still a torus
   EXPECT_NEAR(torus.volume_m3 / torus.input_volume_m3, 1.0, 0.03);
