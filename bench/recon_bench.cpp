@@ -44,20 +44,6 @@ sim::Scene MakeScene(const std::string& name, double size_m) {
   return scene;
 }
 
-// Largest distance by which a point of `truth` lies outside `hull` (0 if none), using the
-// closest face's normal for the side.
-double MaxOutside(const Mesh& truth, const Mesh& hull, std::size_t samples) {
-  const TriangleTree tree(hull);
-  double worst = 0.0;
-  for (const auto& p : SampleSurface(truth, samples, 3)) {
-    const auto hit = tree.ClosestPoint(p);
-    const auto& t = tree.triangles()[hit.triangle];
-    const Eigen::Vector3d n = (t.b - t.a).cross(t.c - t.a);
-    if ((p - hit.point).dot(n) > 0.0) worst = std::max(worst, hit.distance);
-  }
-  return worst;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -180,13 +166,13 @@ int main(int argc, char** argv) {
                 silhouette_seconds + hull_seconds + mesh_seconds);
 
     const auto truth_to_hull = MeasureSurfaceDistance(sim_views.truth_mesh, hull.mesh, 20000);
+    const Containment containment = MeasureContainment(sim_views.truth_mesh, hull.mesh);
     std::printf(
         "hull vs truth: Chamfer %.3f mm, Hausdorff %.3f mm, truth->hull mean %.3f mm "
         "(%.2f voxels), truth outside hull by at most %.3f mm (%.2f voxels)\n",
         truth_to_hull.chamfer() * 1e3, truth_to_hull.hausdorff() * 1e3,
         truth_to_hull.mean_a_to_b * 1e3, truth_to_hull.mean_a_to_b / voxel,
-        MaxOutside(sim_views.truth_mesh, hull.mesh, 20000) * 1e3,
-        MaxOutside(sim_views.truth_mesh, hull.mesh, 20000) / voxel);
+        containment.max_outside * 1e3, containment.max_outside / voxel);
     const auto mesh_to_hull = MeasureSurfaceDistance(optimized.mesh, hull.mesh, 20000);
     const auto topology = AnalyzeTopology(optimized.mesh);
     const auto intersections = FindSelfIntersections(optimized.mesh, 10);

@@ -319,6 +319,21 @@ double SignedVolume(const Mesh& mesh) {
   return volume / 6.0;
 }
 
+Containment MeasureContainment(const Mesh& inner, const Mesh& outer, std::size_t samples) {
+  const TriangleTree tree(outer);
+  Containment result;
+  const auto points = SampleSurface(inner, samples, 5);
+  for (const auto& p : points) {
+    const auto hit = tree.ClosestPoint(p);
+    const auto& t = tree.triangles()[hit.triangle];
+    if ((p - hit.point).dot((t.b - t.a).cross(t.c - t.a)) > 0.0)
+      result.max_outside = std::max(result.max_outside, hit.distance);
+    result.mean_distance += hit.distance;
+  }
+  result.mean_distance /= static_cast<double>(points.size());
+  return result;
+}
+
 SurfaceDistance MeasureSurfaceDistance(const Mesh& a, const Mesh& b, std::size_t samples) {
   const TriangleTree tree_a(a);
   const TriangleTree tree_b(b);

@@ -35,6 +35,9 @@ class DistanceMap {
     cv::Mat object = mask >= 128;
     const cv::Rect box = cv::boundingRect(object);
     if (box.area() == 0) throw InvalidArgument(name + ": silhouette is empty");
+    box_ = box;
+    const cv::Moments m = cv::moments(object, true);
+    centroid_ = Eigen::Vector2d(m.m10 / m.m00, m.m01 / m.m00);
     margin_ = std::max(32, std::max(box.width, box.height) / 4);
     crop_ = cv::Rect(box.x - margin_, box.y - margin_, box.width + 2 * margin_,
                      box.height + 2 * margin_) &
@@ -52,12 +55,13 @@ class DistanceMap {
       auto* s = sd_.ptr<float>(y);
       for (int x = 0; x < crop_.width; ++x) s[x] = in[x] ? di[x] - 0.5f : 0.5f - dout[x];
     }
-    full_ = cv::countNonZero(object) == object.rows * object.cols;
   }
 
   int width() const { return width_; }
   int height() const { return height_; }
-  bool full() const { return full_; }
+  // The silhouette's bounding box and centroid, pixels.
+  const cv::Rect& box() const { return box_; }
+  const Eigen::Vector2d& centroid() const { return centroid_; }
 
   // Whether a pixel position lies on the photo (pixel centres at integers).
   bool InImage(double x, double y, double margin = 0.0) const {
@@ -95,7 +99,8 @@ class DistanceMap {
   int width_ = 0;
   int height_ = 0;
   int margin_ = 0;
-  bool full_ = false;
+  cv::Rect box_;
+  Eigen::Vector2d centroid_;
   cv::Rect crop_;
   cv::Mat sd_;
 };
@@ -252,7 +257,7 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views, const VisualH
       d.translation = view.camera().cam_from_world.translation;
       d.focal_max = std::max(view.camera().fx, view.camera().fy);
       d.focal_mean = 0.5 * (view.camera().fx + view.camera().fy);
-      if (cv::countNonZero(mask >= 128) == 0) {
+      if (cv::countNonZero(mask >= 128) == 0) {  // collected, to name every empty view
         std::lock_guard<std::mutex> lock(empty_mutex);
         empty_views.push_back(view.name());
       } else {
@@ -278,17 +283,13 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views, const VisualH
   std::vector<Ray> rays;
   double half_extent = 0.0;
   for (std::size_t i = 0; i < views.size(); ++i) {
-    const cv::Mat object = views[i].Mask() >= 128;
-    const cv::Moments m = cv::moments(object, true);
-    const Eigen::Vector2d centroid(m.m10 / m.m00, m.m01 / m.m00);
-    const auto ray = views[i].camera().RayThrough(centroid);
+    const auto ray = views[i].camera().RayThrough(data[i].distance->centroid());
     CAROUSEL_CHECK(ray.has_value(), "no ray through the centroid of " << views[i].name());
     rays.push_back(*ray);
   }
   const Eigen::Vector3d centre = ClosestPointToRays(rays);
   for (std::size_t i = 0; i < views.size(); ++i) {
-    const cv::Mat object = views[i].Mask() >= 128;
-    const cv::Rect box = cv::boundingRect(object);
+    const cv::Rect& box = data[i].distance->box();
     const CameraModel& camera = views[i].camera();
     const Eigen::Vector3d p =
         camera.cam_from_world.rotation * centre + camera.cam_from_world.translation;
@@ -303,7 +304,6 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views, const VisualH
                                cv::Point2d(box.x, box.br().y), cv::Point2d(box.br())})
       extent_px = std::max(extent_px, std::hypot(corner.x - c.x(), corner.y - c.y()));
     half_extent = std::max(half_extent, 1.3 * extent_px * p.z() / data[i].focal_mean);
-    views[i].ReleasePixels();
   }
   Eigen::AlignedBox3d region(centre - Eigen::Vector3d::Constant(half_extent),
                              centre + Eigen::Vector3d::Constant(half_extent));

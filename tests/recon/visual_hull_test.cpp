@@ -36,27 +36,6 @@ std::vector<View> WithComputedMasks(const sim::SimViews& capture) {
   return WithMasks(capture, ComputeSilhouettes(capture.views, {}, {}, progress).masks);
 }
 
-// Largest distance by which a point of `truth` lies outside `hull` (using the side of the
-// closest face), and the mean unsigned distance.
-struct Containment {
-  double max_outside = 0.0;
-  double mean = 0.0;
-};
-Containment Measure(const Mesh& truth, const Mesh& hull) {
-  const TriangleTree tree(hull);
-  Containment c;
-  const auto points = SampleSurface(truth, 8000, 5);
-  for (const auto& p : points) {
-    const auto hit = tree.ClosestPoint(p);
-    const auto& t = tree.triangles()[hit.triangle];
-    if ((p - hit.point).dot((t.b - t.a).cross(t.c - t.a)) > 0.0)
-      c.max_outside = std::max(c.max_outside, hit.distance);
-    c.mean += hit.distance;
-  }
-  c.mean /= static_cast<double>(points.size());
-  return c;
-}
-
 void ExpectClosedManifold(const Mesh& mesh) {
   const MeshTopology topology = AnalyzeTopology(mesh);
   EXPECT_GT(topology.faces, 1000u);
@@ -77,9 +56,9 @@ TEST(VisualHullTest, SphereFromTruthMasksIsTightAndContainsTheObject) {
   ExpectClosedManifold(hull.mesh);
   const double voxel = hull.voxel_size_m;
   EXPECT_NEAR(voxel, 0.25 / 96, 0.25 / 96 * 0.1);
-  const Containment c = Measure(capture.truth_mesh, hull.mesh);
+  const Containment c = MeasureContainment(capture.truth_mesh, hull.mesh, 8000);
   EXPECT_LE(c.max_outside, 1.5 * voxel);
-  EXPECT_LE(c.mean, 1.0 * voxel);
+  EXPECT_LE(c.mean_distance, 1.0 * voxel);
   const double sphere_volume = 4.0 / 3.0 * std::numbers::pi * std::pow(0.125, 3);
   EXPECT_GT(hull.volume_m3, 0.99 * sphere_volume);
   EXPECT_LT(hull.volume_m3, 1.10 * sphere_volume);
@@ -98,7 +77,7 @@ TEST_P(HullOnScene, ContainsTheObject) {
   Progress progress;
   const VisualHullResult hull = ComputeVisualHull(views, options, progress);
   ExpectClosedManifold(hull.mesh);
-  const Containment c = Measure(capture.truth_mesh, hull.mesh);
+  const Containment c = MeasureContainment(capture.truth_mesh, hull.mesh, 8000);
   EXPECT_LE(c.max_outside, 1.5 * hull.voxel_size_m) << "voxel " << hull.voxel_size_m;
   // Optimized mesh: exact face count, closed, manifold, no self-intersections, close to the
   // hull, same volume.
@@ -139,7 +118,7 @@ TEST(VisualHullTest, ViewsThatSeePartOfTheObjectDoNotCarveTheRest) {
   options.resolution = 64;
   Progress progress;
   const VisualHullResult hull = ComputeVisualHull(views, options, progress);
-  const Containment c = Measure(capture.truth_mesh, hull.mesh);
+  const Containment c = MeasureContainment(capture.truth_mesh, hull.mesh, 8000);
   EXPECT_LE(c.max_outside, 1.5 * hull.voxel_size_m);
 }
 

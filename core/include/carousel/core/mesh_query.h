@@ -85,6 +85,15 @@ MeshTopology AnalyzeTopology(const Mesh& mesh);
 // Signed enclosed volume (positive for a closed mesh with outward, counter-clockwise faces).
 double SignedVolume(const Mesh& mesh);
 
+// How far points on `inner` lie outside the closed surface `outer` (side from the closest
+// face's orientation), from `samples` points: the largest such distance (0 if none) and the
+// mean unsigned distance to `outer`.
+struct Containment {
+  double max_outside = 0.0;
+  double mean_distance = 0.0;
+};
+Containment MeasureContainment(const Mesh& inner, const Mesh& outer, std::size_t samples = 20000);
+
 // Chamfer-style distances between two surfaces from `samples` points on each.
 struct SurfaceDistance {
   double mean_a_to_b = 0.0;  // mean distance of points on a to surface b
