@@ -53,7 +53,7 @@ SimViews RenderViews(const Scene& scene, const SimViewsOptions& options) {
       render.seed = options.render.seed * 1000003ULL + static_cast<std::uint64_t>(index++);
       RenderResult rendered = Render(scene, camera, angle, render);
       View view(camera, {}, {}, angle);
-      char name[32];
+      char name[48];  // "cam" + 20 digits + "_stop" + 11 + NUL
       std::snprintf(name, sizeof name, "cam%zu_stop%02d", c, stop);
       view.set_name(name);
       view.SetImage(ThroughJpeg(rendered.image, options.jpeg_quality));
