@@ -5,6 +5,7 @@
 #include <atomic>
 #include <cmath>
 #include <numbers>
+#include <optional>
 
 #include <Eigen/Dense>
 #include <opencv2/imgproc.hpp>
@@ -41,6 +42,25 @@ struct ColourModel {
   }
 };
 
+// The model along image row `ny` (normalised), at the centres of `width` pixels.
+void EvaluateRow(const ColourModel& model, double ny, int width, std::vector<cv::Vec3f>* row) {
+  // c(x) = r0 + r1 x + r2 x^2 per channel for this row.
+  std::array<float, 3> r0{}, r1{}, r2{};
+  for (int ch = 0; ch < 3; ++ch) {
+    const auto& c = model.coeff;
+    r0[ch] = static_cast<float>(c(0, ch) + (model.terms > 1 ? c(2, ch) * ny : 0.0) +
+                                (model.terms > 3 ? c(5, ch) * ny * ny : 0.0));
+    r1[ch] = static_cast<float>(model.terms > 1 ? c(1, ch) + (model.terms > 3 ? c(4, ch) * ny : 0.0)
+                                                : 0.0);
+    r2[ch] = static_cast<float>(model.terms > 3 ? c(3, ch) : 0.0);
+  }
+  const float scale = 2.0f / static_cast<float>(width);
+  for (int x = 0; x < width; ++x) {
+    const float nx = (static_cast<float>(x) + 0.5f) * scale - 1.0f;
+    for (int ch = 0; ch < 3; ++ch) (*row)[x][ch] = r0[ch] + nx * (r1[ch] + nx * r2[ch]);
+  }
+}
+
 struct Sample {
   double x, y;
   cv::Vec3f colour;
@@ -52,7 +72,25 @@ struct Sample {
 bool FitColourModel(const std::vector<Sample>& samples, const std::vector<bool>& seed, int terms,
                     double floor_levels, std::size_t min_inliers, ColourModel* model) {
   model->terms = terms;
+  // Start from the seeds near their median colour: a least-squares fit to seeds of which a
+  // third are the object (framed tight, it covers a side of the border) would be dragged
+  // towards it and never recover.
   std::vector<bool> inlier = seed;
+  {
+    std::array<std::vector<float>, 3> channel;
+    for (std::size_t i = 0; i < samples.size(); ++i)
+      if (seed[i])
+        for (int ch = 0; ch < 3; ++ch) channel[ch].push_back(samples[i].colour[ch]);
+    if (channel[0].empty()) return false;
+    cv::Vec3f median;
+    for (int ch = 0; ch < 3; ++ch) {
+      auto& v = channel[ch];
+      std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+      median[ch] = v[v.size() / 2];
+    }
+    for (std::size_t i = 0; i < samples.size(); ++i)
+      inlier[i] = seed[i] && cv::norm(samples[i].colour - median) <= 2.5 * floor_levels;
+  }
   for (int iteration = 0; iteration < 6; ++iteration) {
     std::size_t n = 0;
     for (const bool b : inlier) n += b ? 1 : 0;
@@ -86,27 +124,49 @@ bool FitColourModel(const std::vector<Sample>& samples, const std::vector<bool>&
   return n >= min_inliers;
 }
 
-// The turntable plate's outline in the image, filled (plate) and as a rim band.
-void PlateRegions(const CameraModel& camera, double radius_m, double rim_px, cv::Mat* plate,
-                  cv::Mat* rim) {
+// The turntable plate's outline in the image, filled (plate), and the rim band where plate and
+// backdrop meet: the outline swept over radius +-rim_m and height +-rim_m (the plate's
+// thickness, chamfer, and the uncertainty of its height), grown by rim_px (anti-aliasing).
+void PlateRegions(const CameraModel& camera, double radius_m, double rim_m, double rim_px,
+                  cv::Mat* plate, cv::Mat* rim) {
   *plate = cv::Mat::zeros(camera.height, camera.width, CV_8UC1);
   *rim = cv::Mat::zeros(camera.height, camera.width, CV_8UC1);
   if (radius_m <= 0.0) return;
   constexpr int kPoints = 720;
   constexpr int kShift = 4;  // sub-pixel vertex precision for OpenCV's drawing
-  std::vector<cv::Point> outline;
   const double limit = 4.0 * std::max(camera.width, camera.height);
-  for (int i = 0; i < kPoints; ++i) {
-    const double t = 2.0 * std::numbers::pi * i / kPoints;
-    const auto pixel = camera.Project({radius_m * std::cos(t), radius_m * std::sin(t), 0.0});
-    if (!pixel || std::abs(pixel->x()) > limit || std::abs(pixel->y()) > limit) continue;
-    outline.emplace_back(cvRound(pixel->x() * (1 << kShift)), cvRound(pixel->y() * (1 << kShift)));
-  }
+  auto project = [&](double r, double t, double z) -> std::optional<cv::Point> {
+    const auto pixel = camera.Project({r * std::cos(t), r * std::sin(t), z});
+    if (!pixel || std::abs(pixel->x()) > limit || std::abs(pixel->y()) > limit) return {};
+    return cv::Point(cvRound(pixel->x() * (1 << kShift)), cvRound(pixel->y() * (1 << kShift)));
+  };
+  std::vector<cv::Point> outline;
+  for (int i = 0; i < kPoints; ++i)
+    if (const auto p = project(radius_m, 2.0 * std::numbers::pi * i / kPoints, 0.0))
+      outline.push_back(*p);
   if (outline.size() < 3) return;
-  const std::vector<std::vector<cv::Point>> polygons{outline};
-  cv::fillPoly(*plate, polygons, cv::Scalar(255), cv::LINE_8, kShift);
-  const int thickness = std::max(1, static_cast<int>(std::ceil(2.0 * rim_px)));
-  cv::polylines(*rim, polygons, true, cv::Scalar(255), thickness, cv::LINE_8, kShift);
+  cv::fillPoly(*plate, std::vector<std::vector<cv::Point>>{outline}, cv::Scalar(255), cv::LINE_8,
+               kShift);
+  // Band: per outline segment, the convex hull of the swept corners.
+  const double r_in = std::max(0.0, radius_m - rim_m);
+  const double r_out = radius_m + rim_m;
+  for (int i = 0; i < kPoints; ++i) {
+    std::vector<cv::Point> corners;
+    for (const int step : {i, i + 1}) {
+      const double t = 2.0 * std::numbers::pi * step / kPoints;
+      for (const double r : {r_in, r_out})
+        for (const double z : {-rim_m, rim_m})
+          if (const auto p = project(r, t, z)) corners.push_back(*p);
+    }
+    if (corners.size() < 3) continue;
+    std::vector<cv::Point> hull;
+    cv::convexHull(corners, hull);
+    cv::fillConvexPoly(*rim, hull, cv::Scalar(255), cv::LINE_8, kShift);
+  }
+  const int grow = static_cast<int>(std::ceil(rim_px));
+  if (grow > 0)
+    cv::dilate(*rim, *rim,
+               cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * grow + 1, 2 * grow + 1)));
 }
 
 double Norm3(const cv::Vec3f& v) { return std::sqrt(v.dot(v)); }
@@ -204,6 +264,7 @@ void SilhouetteOptions::Validate() const {
         "max_highlight_brightness", ">= 1");
   check(plate_radius_m >= 0.0 && std::isfinite(plate_radius_m), "plate_radius_m", ">= 0");
   check(plate_rim_px >= 0.0 && plate_rim_px <= 50.0, "plate_rim_px", "in [0, 50]");
+  check(plate_rim_m >= 0.0 && plate_rim_m <= 0.05, "plate_rim_m", "in [0, 0.05]");
   check(min_component_fraction >= 0.0 && min_component_fraction <= 1.0, "min_component_fraction",
         "in [0, 1]");
   check(max_hole_fraction >= 0.0 && max_hole_fraction <= 1.0, "max_hole_fraction", "in [0, 1]");
@@ -233,8 +294,8 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
   const int width = image.cols;
   const int height = image.rows;
   cv::Mat plate, rim;
-  PlateRegions(camera, difference ? 0.0 : options.plate_radius_m, options.plate_rim_px, &plate,
-               &rim);
+  PlateRegions(camera, difference ? 0.0 : options.plate_radius_m, options.plate_rim_m,
+               options.plate_rim_px, &plate, &rim);
 
   // --- the expected background colour per pixel ---------------------------------------------
   ColourModel backdrop;
@@ -247,14 +308,14 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
     const double scale = std::min(1.0, static_cast<double>(kFitSize) / std::max(width, height));
     cv::Mat small, small_plate;
     cv::resize(image, small, cv::Size(), scale, scale, cv::INTER_AREA);
-    cv::Mat plate_grown;
-    cv::dilate(plate, plate_grown, cv::Mat(), cv::Point(-1, -1),
-               static_cast<int>(std::ceil(options.plate_rim_px + 1.0 / scale)));
+    // Fit samples stay clear of the rim band by a thumbnail pixel.
+    const cv::Mat pad = cv::getStructuringElement(
+        cv::MORPH_RECT, cv::Size(2 * static_cast<int>(std::ceil(1.0 / scale)) + 1,
+                                 2 * static_cast<int>(std::ceil(1.0 / scale)) + 1));
+    cv::Mat plate_grown, plate_inner, small_plate_inner;
+    cv::dilate(plate | rim, plate_grown, pad);
     cv::resize(plate_grown, small_plate, small.size(), 0, 0, cv::INTER_NEAREST);
-    cv::Mat plate_inner;
-    cv::erode(plate, plate_inner, cv::Mat(), cv::Point(-1, -1),
-              static_cast<int>(std::ceil(options.plate_rim_px + 1.0 / scale)));
-    cv::Mat small_plate_inner;
+    cv::erode(plate & ~rim, plate_inner, pad);
     cv::resize(plate_inner, small_plate_inner, small.size(), 0, 0, cv::INTER_NEAREST);
     std::vector<Sample> backdrop_samples, plate_samples;
     std::vector<bool> backdrop_seed, plate_seed;
@@ -288,19 +349,8 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
                         "the frame, or a cluttered background; use the difference method)");
     }
     if (!plate_samples.empty()) {
-      // Seed the plate fit with the pixels close to the median colour: the object may cover
-      // part of the plate.
-      std::array<std::vector<float>, 3> channel;
-      for (const auto& s : plate_samples)
-        for (int ch = 0; ch < 3; ++ch) channel[ch].push_back(s.colour[ch]);
-      cv::Vec3f median;
-      for (int ch = 0; ch < 3; ++ch) {
-        auto& v = channel[ch];
-        std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-        median[ch] = v[v.size() / 2];
-      }
-      for (std::size_t i = 0; i < plate_samples.size(); ++i)
-        plate_seed[i] = Norm3(plate_samples[i].colour - median) <= 3.0 * floor;
+      // All plate pixels seed the fit, which starts from those near their median colour:
+      // the object may cover part of the plate.
       const auto min_plate = std::max<std::size_t>(10, plate_samples.size() / 5);
       have_plate = FitColourModel(plate_samples, plate_seed, 3, floor, min_plate, &plate_colour) ||
                    FitColourModel(plate_samples, plate_seed, 1, floor, min_plate, &plate_colour);
@@ -322,22 +372,34 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
     if (have_plate && plate.at<std::uint8_t>(y, x)) return plate_colour.At(nx, ny);
     return backdrop.At(nx, ny);
   };
+  // Per row, the models are quadratics in x: evaluated once per row into buffers.
   cv::Mat fg(height, width, CV_8UC1);
+  std::vector<cv::Vec3f> backdrop_row(width), plate_row(width);
   for (int y = 0; y < height; ++y) {
     const auto* in = image.ptr<cv::Vec3b>(y);
     auto* out = fg.ptr<std::uint8_t>(y);
     const auto* rim_row = rim.ptr<std::uint8_t>(y);
+    const auto* plate_mask_row = plate.ptr<std::uint8_t>(y);
+    const auto* smoothed_row = difference ? smoothed_background.ptr<cv::Vec3b>(y) : nullptr;
     const double ny = (y + 0.5) / height * 2.0 - 1.0;
+    if (!difference) {
+      EvaluateRow(backdrop, ny, width, &backdrop_row);
+      if (have_plate) EvaluateRow(plate_colour, ny, width, &plate_row);
+    }
     for (int x = 0; x < width; ++x) {
       const cv::Vec3f i(in[x][0], in[x][1], in[x][2]);
-      bool is_background = classifier.IsBackground(i, expected(x, y));
+      cv::Vec3f b;
+      if (difference)
+        b = cv::Vec3f(smoothed_row[x][0], smoothed_row[x][1], smoothed_row[x][2]);
+      else
+        b = have_plate && plate_mask_row[x] ? plate_row[x] : backdrop_row[x];
+      bool is_background = classifier.IsBackground(i, b);
       if (!is_background && have_plate && rim_row[x]) {
         // Rim: the pixel may blend plate and backdrop, or be either.
-        const double nx = (x + 0.5) / width * 2.0 - 1.0;
-        const cv::Vec3f b = backdrop.At(nx, ny);
-        const cv::Vec3f p = plate_colour.At(nx, ny);
-        is_background = classifier.IsBackground(i, b) || classifier.IsBackground(i, p) ||
-                        DistanceToSegment(i, b, p) <= rim_tolerance;
+        const cv::Vec3f& bb = backdrop_row[x];
+        const cv::Vec3f& p = plate_row[x];
+        is_background = classifier.IsBackground(i, bb) || classifier.IsBackground(i, p) ||
+                        DistanceToSegment(i, bb, p) <= rim_tolerance;
       }
       out[x] = is_background ? 0 : 255;
     }

@@ -5,6 +5,8 @@
 #include <opencv2/imgproc.hpp>
 
 #include "carousel/core/error.h"
+#include "carousel/sim/renderer.h"
+#include "carousel/sim/test_scenes.h"
 #include "carousel/testing/testing.h"
 #include "recon_fixtures.h"
 
@@ -44,6 +46,44 @@ INSTANTIATE_TEST_SUITE_P(Scenes, SilhouetteOnScene,
                            return param_info.param.first + "_" +
                                   SilhouetteMethodName(param_info.param.second);
                          });
+
+// A zoomed-in copy of a capture's view (fx, fy times `zoom`, the principal point moved by the
+// given fractions of the frame), rendered with noise.
+sim::RenderResult RenderZoomed(const View& view, double zoom, double shift_x, double shift_y,
+                               CameraModel* camera) {
+  *camera = view.camera();
+  camera->fx *= zoom;
+  camera->fy *= zoom;
+  camera->cx += shift_x * camera->width;
+  camera->cy += shift_y * camera->height;
+  sim::RenderOptions render;
+  render.noise_sigma = 1.5;
+  return sim::Render(sim::MakeSphereScene(0.125, {0.0, 0.0, 0.125}, 5), *camera,
+                     view.table_angle_rad(), render);
+}
+
+// The simulator's plate lies 1 mm below z = 0 (a real plate has a thickness and an edge). Seen
+// up close (as a 5184-pixel photo sees it), its far rim lies pixels away from the outline at
+// z = 0 and must stay background.
+TEST(SilhouetteTest, PlateRimSeenUpCloseIsNotObject) {
+  const sim::SimViews& capture = testing::SimulatedCapture("sphere");
+  for (const int i : {0, 5}) {
+    CameraModel camera;
+    // The frame's centre on the far rim where it disappears behind the object.
+    const sim::RenderResult photo = RenderZoomed(capture.views[i], 5.0, 0.94, -0.78, &camera);
+    const cv::Mat mask = ComputeSilhouette(photo.image, camera, {}, {}, capture.views[i].name());
+    EXPECT_GE(MaskIoU(mask, photo.mask), 0.99) << capture.views[i].name();
+  }
+}
+
+// Framed tight, the object covers a side of the photo's border, where the backdrop fit starts.
+TEST(SilhouetteTest, ObjectCoveringASideOfTheFrameIsKeyed) {
+  const sim::SimViews& capture = testing::SimulatedCapture("sphere");
+  CameraModel camera;
+  const sim::RenderResult photo = RenderZoomed(capture.views[0], 2.0, 0.5, 0.0, &camera);
+  const cv::Mat mask = ComputeSilhouette(photo.image, camera, {}, {}, "tight");
+  EXPECT_GE(MaskIoU(mask, photo.mask), 0.99);
+}
 
 // A shadow darkens the backdrop beside the object: keying stays background there.
 TEST(SilhouetteTest, ShadowOnTheBackdropIsNotObject) {

@@ -57,7 +57,10 @@ struct SilhouetteOptions {
   // Turntable plate radius, metres, centred on the turntable axis at z = 0 of the views'
   // world frame; 0 = no plate to remove (a dataset that is not on our turntable).
   double plate_radius_m = 0.2;
-  // Half-width of the plate's rim band in pixels, where plate/backdrop blends are background.
+  // The plate's rim band, where plate/backdrop blends are background: the outline swept over
+  // +-plate_rim_m in radius and height (plate thickness and edge, its height not exactly at
+  // z = 0), metres, 0..0.05, grown by plate_rim_px pixels (anti-aliasing), 0..50.
+  double plate_rim_m = 0.0015;
   double plate_rim_px = 1.5;
   // Boundary refinement by local alpha estimation.
   bool refine_boundary = true;
