@@ -212,6 +212,7 @@ void MeshOptimizationOptions::Validate() const {
   check(max_normal_deviation_deg > 0.0 && max_normal_deviation_deg <= 180.0,
         "max_normal_deviation_deg", "in (0, 180]");
   check(max_aspect_ratio > 1.0 && std::isfinite(max_aspect_ratio), "max_aspect_ratio", "> 1");
+  check(target_volume_m3 >= 0.0 && std::isfinite(target_volume_m3), "target_volume_m3", ">= 0");
 }
 
 void TaubinSmooth(Mesh* mesh, int iterations, double lambda, double mu) {
@@ -258,6 +259,37 @@ std::size_t DecimateQuadric(Mesh* mesh, std::size_t target_faces, double max_nor
   return mesh->n_faces();
 }
 
+namespace {
+
+// Taubin smoothing that never makes the surface intersect itself (a thin part's two sides
+// pulled through each other): where faces come to intersect, their vertices and those
+// around them go back to where they were, until no faces intersect.
+void SmoothWithoutIntersections(Mesh* mesh, const MeshOptimizationOptions& options) {
+  std::vector<Mesh::Point> before(mesh->n_vertices());
+  for (const auto v : mesh->vertices()) before[v.idx()] = mesh->point(v);
+  TaubinSmooth(mesh, options.smoothing_iterations, options.taubin_lambda, options.taubin_mu);
+  constexpr int kRounds = 20;
+  for (int round = 0; round < kRounds; ++round) {
+    const auto pairs = FindSelfIntersections(*mesh, 100000);
+    if (pairs.empty()) return;
+    std::vector<Mesh::VertexHandle> revert;
+    for (const auto& [f, g] : pairs)
+      for (const int face : {f, g})
+        for (const auto v : mesh->fv_range(Mesh::FaceHandle(face))) {
+          revert.push_back(v);
+          for (const auto w : mesh->vv_range(v)) revert.push_back(w);
+        }
+    for (const auto v : revert) mesh->set_point(v, before[v.idx()]);
+    if (round == 0)
+      CAROUSEL_LOG_INFO("mesh: smoothing folded a thin part (" << pairs.size()
+                                                               << " pairs of faces); undone there");
+  }
+  for (const auto v : mesh->vertices()) mesh->set_point(v, before[v.idx()]);
+  CAROUSEL_LOG_WARN("mesh: smoothing undone: it made the surface intersect itself");
+}
+
+}  // namespace
+
 void RemeshIsotropic(Mesh* mesh, double edge_length, int iterations) {
   const double high = 4.0 / 3.0 * edge_length;
   const double low = 4.0 / 5.0 * edge_length;
@@ -276,17 +308,20 @@ MeshOptimizationResult OptimizeMesh(const Mesh& hull, const MeshOptimizationOpti
   MeshOptimizationResult result;
   result.input_faces = hull.n_faces();
   result.input_volume_m3 = SignedVolume(hull);
+  const double target_volume =
+      options.target_volume_m3 > 0.0 ? options.target_volume_m3 : result.input_volume_m3;
   Mesh mesh = hull;
   const auto target = static_cast<std::size_t>(options.target_faces);
   Stopwatch stopwatch;
 
   progress.BeginStage("mesh: smoothing");
   CollapseDegenerateEdges(&mesh);
-  TaubinSmooth(&mesh, options.smoothing_iterations, options.taubin_lambda, options.taubin_mu);
+  SmoothWithoutIntersections(&mesh, options);
   progress.EndStage();
   result.seconds_smooth = stopwatch.ElapsedSeconds();
 
   if (options.remesh) {
+    const Mesh smoothed = mesh;
     progress.BeginStage("mesh: remeshing");
     stopwatch.Restart();
     const auto intermediate =
@@ -303,32 +338,92 @@ MeshOptimizationResult OptimizeMesh(const Mesh& hull, const MeshOptimizationOpti
     // Equilateral triangles of edge L have area sqrt(3)/4 L^2.
     const double faces = options.remesh_face_factor * options.target_faces;
     const double edge = std::sqrt(4.0 * mesh.SurfaceArea() / (std::sqrt(3.0) * faces));
-    RemeshIsotropic(&mesh, edge, options.remesh_iterations);
+    // Every step below starts from a mesh whose faces do not intersect.
+    if (!FindSelfIntersections(mesh, 1).empty()) {
+      CAROUSEL_LOG_INFO(
+          "mesh: the intermediate decimation folded a thin part; decimating the "
+          "smoothed hull directly");
+      mesh = smoothed;
+    } else {
+      Mesh decimated = mesh;
+      RemeshIsotropic(&mesh, edge, options.remesh_iterations);
+      if (!FindSelfIntersections(mesh, 1).empty()) {
+        CAROUSEL_LOG_INFO("mesh: remeshing folded a thin part; decimating without it");
+        mesh = std::move(decimated);
+      }
+    }
     result.seconds_remesh = stopwatch.ElapsedSeconds();
     progress.EndStage();
   }
 
   progress.BeginStage("mesh: decimation");
   stopwatch.Restart();
-  std::size_t faces =
-      DecimateQuadric(&mesh, target, options.max_normal_deviation_deg, options.max_aspect_ratio);
-  if (faces > target + target / 100) {
-    // The guards blocked the last collapses: relax the aspect guard, then the normal guard.
-    CAROUSEL_LOG_INFO("mesh: decimation stopped at " << faces << " faces; relaxing the guards");
-    faces = DecimateQuadric(&mesh, target, std::min(90.0, 1.5 * options.max_normal_deviation_deg),
-                            4.0 * options.max_aspect_ratio);
+  // A collapse may fold a thin part (a 2 mm heel tab) through its other side. Such places are
+  // found after the decimation, and the decimation is redone with the vertices around them
+  // locked at the finer (remeshed) resolution, until no two faces intersect.
+  const Mesh base = mesh;
+  std::vector<std::pair<Eigen::Vector3d, double>> locked;  // balls: centre, radius
+  constexpr int kMaxRepairRounds = 6;
+  for (int round = 0;; ++round) {
+    if (round > 0) {
+      mesh = base;
+      mesh.request_vertex_status();
+      for (const auto v : mesh.vertices()) {
+        const auto& p = mesh.point(v);
+        const Eigen::Vector3d x(p[0], p[1], p[2]);
+        for (const auto& [centre, radius] : locked)
+          if ((x - centre).squaredNorm() <= radius * radius) mesh.status(v).set_locked(true);
+      }
+    }
+    std::size_t faces =
+        DecimateQuadric(&mesh, target, options.max_normal_deviation_deg, options.max_aspect_ratio);
+    if (faces > target + target / 100) {
+      // The guards blocked the last collapses: relax the aspect guard, then the normal guard.
+      CAROUSEL_LOG_INFO("mesh: decimation stopped at " << faces << " faces; relaxing the guards");
+      DecimateQuadric(&mesh, target, std::min(90.0, 1.5 * options.max_normal_deviation_deg),
+                      4.0 * options.max_aspect_ratio);
+    }
+    if (round > 0) mesh.release_vertex_status();
+    // Smoothing and decimation shrink curved parts slightly: offset the surface along its
+    // normals by the uniform distance that restores the target volume (dV = area * d).
+    for (int iteration = 0; iteration < 3; ++iteration) {
+      mesh.RecomputeNormals();
+      const double area = mesh.SurfaceArea();
+      const double offset = (target_volume - SignedVolume(mesh)) / area;
+      if (!(area > 0.0) || !std::isfinite(offset)) break;
+      for (const auto v : mesh.vertices())
+        mesh.set_point(v, mesh.point(v) + offset * mesh.normal(v));
+    }
+    const auto pairs = FindSelfIntersections(mesh, 1000);
+    result.self_intersections = pairs.size();
+    result.repair_rounds = round;
+    if (pairs.empty()) break;
+    if (round == kMaxRepairRounds) {
+      CAROUSEL_LOG_WARN("mesh: " << pairs.size() << " pairs of faces still intersect after "
+                                 << round << " repair rounds");
+      break;
+    }
+    for (const auto& [f, g] : pairs) {
+      for (const int face : {f, g}) {
+        Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+        std::vector<Eigen::Vector3d> corners;
+        for (const auto v : mesh.fv_range(Mesh::FaceHandle(face))) {
+          const auto& p = mesh.point(v);
+          corners.emplace_back(p[0], p[1], p[2]);
+          centre += corners.back();
+        }
+        centre /= static_cast<double>(corners.size());
+        double radius = 0.0;
+        for (const auto& c : corners) radius = std::max(radius, (c - centre).norm());
+        locked.emplace_back(centre, 1.5 * radius);
+      }
+    }
+    CAROUSEL_LOG_INFO("mesh: " << pairs.size()
+                               << " pairs of faces intersect; decimating again with "
+                                  "their surroundings locked");
   }
   result.seconds_decimate += stopwatch.ElapsedSeconds();
   progress.EndStage();
-  // Smoothing and decimation shrink curved parts slightly: offset the surface along its
-  // normals by the uniform distance that restores the hull's volume (dV = area * d).
-  for (int iteration = 0; iteration < 3; ++iteration) {
-    mesh.RecomputeNormals();
-    const double area = mesh.SurfaceArea();
-    const double offset = (result.input_volume_m3 - SignedVolume(mesh)) / area;
-    if (!(area > 0.0) || !std::isfinite(offset)) break;
-    for (const auto v : mesh.vertices()) mesh.set_point(v, mesh.point(v) + offset * mesh.normal(v));
-  }
   mesh.RecomputeNormals();
   RequireClosedManifold(mesh, "the optimized mesh");
   result.volume_m3 = SignedVolume(mesh);

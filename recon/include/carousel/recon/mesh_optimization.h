@@ -9,9 +9,11 @@
 //      flip towards valence 6, tangential relaxation) at the edge length that gives about
 //      `remesh_face_factor` x the target: well-shaped triangles for the final step.
 //   4. Quadric decimation to exactly `target_faces`, guarded against normal flips and
-//      needle triangles.
+//      needle triangles; where a collapse folded a thin part through another (faces that
+//      intersect), the decimation is redone with the vertices there locked.
 // Every step keeps the mesh closed and manifold; the result is outward oriented. Finally a
-// uniform offset along the normals (a fraction of a millimetre) restores the hull's volume.
+// uniform offset along the normals (a fraction of a millimetre) restores the hull's volume
+// (or options.target_volume_m3).
 // Units: the mesh's own (metres).
 #pragma once
 
@@ -37,6 +39,9 @@ struct MeshOptimizationOptions {
   // and largest triangle aspect ratio (longest edge / its height) a collapse may create, > 1.
   double max_normal_deviation_deg = 60.0;
   double max_aspect_ratio = 10.0;
+  // Volume the result is offset to, m^3; 0 = the input's volume. (The visual hull's, when the
+  // input is its coarser proxy.)
+  double target_volume_m3 = 0.0;
   void Validate() const;
 };
 
@@ -45,6 +50,10 @@ struct MeshOptimizationResult {
   std::size_t input_faces = 0;
   double input_volume_m3 = 0.0;
   double volume_m3 = 0.0;
+  // Pairs of faces that intersect (0 unless the repair gave up; a warning is logged), and the
+  // decimation rounds redone to remove intersections.
+  std::size_t self_intersections = 0;
+  int repair_rounds = 0;
   double seconds_smooth = 0.0;
   double seconds_decimate = 0.0;
   double seconds_remesh = 0.0;
