@@ -38,7 +38,7 @@ class DistanceMap {
     box_ = box;
     const cv::Moments m = cv::moments(object, true);
     centroid_ = Eigen::Vector2d(m.m10 / m.m00, m.m01 / m.m00);
-    margin_ = std::max(32, std::max(box.width, box.height) / 4);
+    margin_ = std::clamp(std::max(box.width, box.height) / 8, 32, 128);
     crop_ = cv::Rect(box.x - margin_, box.y - margin_, box.width + 2 * margin_,
                      box.height + 2 * margin_) &
             cv::Rect(0, 0, width_, height_);
@@ -201,15 +201,238 @@ std::filesystem::path MasksLocation(const std::vector<View>& views) {
   return "silhouettes (in memory)";
 }
 
-struct Vertex {
-  std::uint64_t key;
-  Eigen::Vector3d position;
-};
-
 // Cube corners: bit 0 = +x, bit 1 = +y, bit 2 = +z. The six Freudenthal tetrahedra share the
 // main diagonal 0-7; every edge goes from a corner to one with coordinates >= its own.
 constexpr std::array<std::array<int, 4>, 6> kTetrahedra = {
     {{0, 1, 3, 7}, {0, 1, 5, 7}, {0, 2, 3, 7}, {0, 2, 6, 7}, {0, 4, 5, 7}, {0, 4, 6, 7}}};
+
+// The finest grid: corner (i, j, k) lies at origin + voxel * (i, j, k).
+struct GridFrame {
+  Eigen::Vector3d origin;
+  double voxel = 0.0;
+  Eigen::Vector3i grid{0, 0, 0};  // finest voxels per axis
+  Eigen::AlignedBox3d box;        // origin .. origin + voxel * grid
+  bool on_floor = false;
+  double floor_z = 0.0;
+};
+
+struct Contour {
+  Mesh mesh;
+  std::size_t corners = 0;
+  std::size_t components_dropped = 0;
+  std::size_t faces_dropped = 0;
+};
+
+// Contours the hull's field over `cells` (octree cells of edge 2^level voxels, in that level's
+// integer coordinates) by marching tetrahedra: the field at the cells' corners, a vertex per
+// edge that changes sign, triangles oriented from inside to outside; keeps the largest
+// component. The mesh is empty when no cell crosses the surface.
+Contour ContourCells(const std::vector<Eigen::Vector3i>& cells, int level, const GridFrame& frame,
+                     const Carver& carver, int threads, Progress& progress) {
+  Contour result;
+  const int step = 1 << level;
+  const double size = frame.voxel * step;
+  const std::uint64_t nx = static_cast<std::uint64_t>(frame.grid.x()) + 1;
+  const std::uint64_t ny = static_cast<std::uint64_t>(frame.grid.y()) + 1;
+  // Keys of corners in the finest grid, so that edge keys are unique within a level.
+  auto corner_key = [&](const Eigen::Vector3i& cell, int d) {
+    const std::uint64_t i = static_cast<std::uint64_t>(cell.x() + (d & 1)) * step;
+    const std::uint64_t j = static_cast<std::uint64_t>(cell.y() + ((d >> 1) & 1)) * step;
+    const std::uint64_t k = static_cast<std::uint64_t>(cell.z() + ((d >> 2) & 1)) * step;
+    return i + nx * (j + ny * k);
+  };
+  auto corner_position = [&](std::uint64_t key) {
+    const std::uint64_t i = key % nx;
+    const std::uint64_t j = (key / nx) % ny;
+    const std::uint64_t k = key / (nx * ny);
+    return Eigen::Vector3d(frame.origin + frame.voxel * Eigen::Vector3d(static_cast<double>(i),
+                                                                        static_cast<double>(j),
+                                                                        static_cast<double>(k)));
+  };
+  std::vector<std::uint64_t> corners;
+  corners.reserve(cells.size() * 8);
+  for (const Eigen::Vector3i& c : cells)
+    for (int d = 0; d < 8; ++d) corners.push_back(corner_key(c, d));
+  std::sort(corners.begin(), corners.end());
+  corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
+  result.corners = corners.size();
+  std::vector<double> field(corners.size());
+  ParallelFor(corners.size(), 8192, threads, [&](std::size_t begin, std::size_t end) {
+    progress.CheckCancelled();
+    for (std::size_t i = begin; i < end; ++i) {
+      const Eigen::Vector3d x = corner_position(corners[i]);
+      double f = carver.Field(x, -size);
+      // Closed at the grid's border (and at the floor, the grid's bottom when there is one).
+      f = std::min({f, (x - frame.box.min()).minCoeff() - 0.5 * frame.voxel,
+                    (frame.box.max() - x).minCoeff() - 0.5 * frame.voxel});
+      if (frame.on_floor) f = std::min(f, x.z() - frame.floor_z);
+      if (f == 0.0) f = -1e-9 * frame.voxel;  // the zero set stays off the corners
+      field[i] = f;
+    }
+  });
+  progress.Report(0.5);
+  auto lookup = [&](std::uint64_t key) {
+    const auto it = std::lower_bound(corners.begin(), corners.end(), key);
+    return static_cast<std::size_t>(it - corners.begin());
+  };
+  // Per chunk of cells: vertex entries (edge key = corner key * 8 + direction code, position)
+  // made once per cell edge, and triangles over the chunk's entries, oriented outwards.
+  struct Chunk {
+    std::vector<std::uint64_t> keys;
+    std::vector<Eigen::Vector3d> positions;
+    std::vector<std::array<std::uint32_t, 3>> triangles;
+  };
+  const std::size_t chunk_size = 16384;
+  std::vector<Chunk> chunks((cells.size() + chunk_size - 1) / chunk_size);
+  ParallelFor(cells.size(), chunk_size, threads, [&](std::size_t begin, std::size_t end) {
+    progress.CheckCancelled();
+    Chunk& chunk = chunks[begin / chunk_size];
+    for (std::size_t s = begin; s < end; ++s) {
+      std::array<std::uint64_t, 8> key{};
+      std::array<double, 8> value{};
+      std::array<Eigen::Vector3d, 8> position;
+      for (int d = 0; d < 8; ++d) {
+        key[d] = corner_key(cells[s], d);
+        value[d] = field[lookup(key[d])];
+        position[d] = corner_position(key[d]);
+      }
+      std::array<std::uint32_t, 64> made;  // entry per cell edge (a * 8 + b), or none
+      made.fill(std::numeric_limits<std::uint32_t>::max());
+      auto edge = [&](int a, int b) {
+        if (a > b) std::swap(a, b);  // corner b has coordinates >= corner a
+        std::uint32_t& entry = made[a * 8 + b];
+        if (entry != std::numeric_limits<std::uint32_t>::max()) return entry;
+        const std::uint64_t code = static_cast<std::uint64_t>(b - a);  // 1..7, unique per offset
+        // Clamped away from the corners: no coincident vertices, no zero-area triangles.
+        const double t = std::clamp(value[a] / (value[a] - value[b]), 1e-3, 1.0 - 1e-3);
+        entry = static_cast<std::uint32_t>(chunk.keys.size());
+        chunk.keys.push_back(key[a] * 8 + code);
+        chunk.positions.push_back(position[a] + t * (position[b] - position[a]));
+        return entry;
+      };
+      auto emit = [&](std::uint32_t e0, std::uint32_t e1, std::uint32_t e2,
+                      const Eigen::Vector3d& inside, const Eigen::Vector3d& outside) {
+        const Eigen::Vector3d n = (chunk.positions[e1] - chunk.positions[e0])
+                                      .cross(chunk.positions[e2] - chunk.positions[e0]);
+        if (n.dot(outside - inside) < 0.0) std::swap(e1, e2);
+        chunk.triangles.push_back({e0, e1, e2});
+      };
+      for (const auto& tet : kTetrahedra) {
+        std::array<int, 4> in{}, out{};
+        int n_in = 0;
+        int n_out = 0;
+        Eigen::Vector3d centre_in = Eigen::Vector3d::Zero();
+        Eigen::Vector3d centre_out = Eigen::Vector3d::Zero();
+        for (const int corner : tet) {
+          if (value[corner] > 0.0) {
+            in[n_in++] = corner;
+            centre_in += position[corner];
+          } else {
+            out[n_out++] = corner;
+            centre_out += position[corner];
+          }
+        }
+        if (n_in == 0 || n_out == 0) continue;
+        centre_in /= n_in;
+        centre_out /= n_out;
+        if (n_in == 1 || n_out == 1) {
+          const int apex = n_in == 1 ? in[0] : out[0];
+          const auto& others = n_in == 1 ? out : in;
+          const std::uint32_t e0 = edge(apex, others[0]);
+          const std::uint32_t e1 = edge(apex, others[1]);
+          const std::uint32_t e2 = edge(apex, others[2]);
+          emit(e0, e1, e2, centre_in, centre_out);
+        } else {
+          const std::uint32_t e0 = edge(in[0], out[0]);
+          const std::uint32_t e1 = edge(in[0], out[1]);
+          const std::uint32_t e2 = edge(in[1], out[1]);
+          const std::uint32_t e3 = edge(in[1], out[0]);
+          emit(e0, e1, e2, centre_in, centre_out);
+          emit(e0, e2, e3, centre_in, centre_out);
+        }
+      }
+    }
+  });
+  // Merge: one vertex per edge key (entries sorted by key), triangles renumbered.
+  std::vector<std::size_t> offset(chunks.size() + 1, 0);
+  for (std::size_t c = 0; c < chunks.size(); ++c) offset[c + 1] = offset[c] + chunks[c].keys.size();
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> entries(offset.back());
+  for (std::size_t c = 0; c < chunks.size(); ++c)
+    for (std::size_t i = 0; i < chunks[c].keys.size(); ++i)
+      entries[offset[c] + i] = {chunks[c].keys[i], static_cast<std::uint32_t>(offset[c] + i)};
+  std::sort(entries.begin(), entries.end());
+  std::vector<int> vertex_of(entries.size());
+  std::vector<Eigen::Vector3d> vertices;
+  vertices.reserve(entries.size() / 2);
+  auto position_of = [&](std::uint32_t entry) -> const Eigen::Vector3d& {
+    const std::size_t c =
+        static_cast<std::size_t>(std::upper_bound(offset.begin(), offset.end(), entry) -
+                                 offset.begin()) -
+        1;
+    return chunks[c].positions[entry - offset[c]];
+  };
+  for (std::size_t i = 0; i < entries.size(); ++i) {
+    if (i == 0 || entries[i].first != entries[i - 1].first)
+      vertices.push_back(position_of(entries[i].second));
+    vertex_of[entries[i].second] = static_cast<int>(vertices.size()) - 1;
+  }
+  entries = {};
+  std::vector<std::array<int, 3>> triangles;
+  std::size_t n_triangles = 0;
+  for (const Chunk& chunk : chunks) n_triangles += chunk.triangles.size();
+  triangles.reserve(n_triangles);
+  for (std::size_t c = 0; c < chunks.size(); ++c) {
+    for (const auto& t : chunks[c].triangles)
+      triangles.push_back(
+          {vertex_of[offset[c] + t[0]], vertex_of[offset[c] + t[1]], vertex_of[offset[c] + t[2]]});
+    chunks[c] = Chunk();
+  }
+  progress.Report(0.8);
+
+  // Largest component (union-find over vertices), then the OpenMesh mesh.
+  std::vector<int> parent(vertices.size());
+  std::iota(parent.begin(), parent.end(), 0);
+  auto find = [&](int x) {
+    while (parent[x] != x) {
+      parent[x] = parent[parent[x]];
+      x = parent[x];
+    }
+    return x;
+  };
+  for (const auto& t : triangles) {
+    const int a = find(t[0]);
+    parent[find(t[1])] = a;
+    parent[find(t[2])] = a;
+  }
+  std::vector<std::size_t> faces_per_root(vertices.size(), 0);
+  for (const auto& t : triangles) ++faces_per_root[find(t[0])];
+  const auto largest =
+      std::max_element(faces_per_root.begin(), faces_per_root.end()) - faces_per_root.begin();
+  for (std::size_t r = 0; r < faces_per_root.size(); ++r)
+    if (faces_per_root[r] > 0 && static_cast<std::ptrdiff_t>(r) != largest) {
+      ++result.components_dropped;
+      result.faces_dropped += faces_per_root[r];
+    }
+  if (triangles.empty()) return result;
+  std::vector<int> remap(vertices.size(), -1);
+  Mesh& mesh = result.mesh;
+  mesh.reserve(vertices.size(), 3 * triangles.size() / 2, triangles.size());
+  for (const auto& t : triangles) {
+    if (find(t[0]) != largest) continue;
+    std::array<Mesh::VertexHandle, 3> handles;
+    for (int k = 0; k < 3; ++k) {
+      if (remap[t[k]] < 0) {
+        const auto& p = vertices[t[k]];
+        remap[t[k]] = mesh.add_vertex(Mesh::Point(p.x(), p.y(), p.z())).idx();
+      }
+      handles[k] = Mesh::VertexHandle(remap[t[k]]);
+    }
+    const auto face = mesh.add_face(handles[0], handles[1], handles[2]);
+    CAROUSEL_CHECK(face.is_valid(), "marching tetrahedra produced a non-manifold triangle");
+  }
+  mesh.RecomputeNormals();
+  return result;
+}
 
 }  // namespace
 
@@ -221,10 +444,12 @@ void VisualHullOptions::Validate() const {
   check(resolution == 0 || (resolution >= 16 && resolution <= 4096), "resolution",
         "0 or in [16, 4096]");
   check(voxel_px > 0.0 && std::isfinite(voxel_px), "voxel_px", "> 0");
+  check(max_resolution >= 16 && max_resolution <= 4096, "max_resolution", "in [16, 4096]");
   check(std::isfinite(floor_z_m), "floor_z_m", "finite");
   check(min_view_consistency >= 0.0 && min_view_consistency <= 1.0, "min_view_consistency",
         "in [0, 1]");
   check(max_surface_cells >= 1000, "max_surface_cells", ">= 1000");
+  check(proxy_max_faces == 0 || proxy_max_faces >= 10000, "proxy_max_faces", "0 or >= 10000");
   check(threads >= 0, "threads", ">= 0");
 }
 
@@ -416,7 +641,7 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views, const VisualH
       const double z = (d.rotation * middle + d.translation).z();
       if (z > kNearM) finest = std::min(finest, z / d.focal_max);
     }
-    voxel = options.voxel_px * finest;
+    voxel = std::max(options.voxel_px * finest, longest / options.max_resolution);
   }
   int levels = 0;
   while (longest / (voxel * (1 << levels)) > kRootCells) ++levels;
@@ -447,7 +672,7 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views, const VisualH
   for (int k = 0; k < roots.z(); ++k)
     for (int j = 0; j < roots.y(); ++j)
       for (int i = 0; i < roots.x(); ++i) cells.emplace_back(i, j, k);
-  std::vector<Cell> surface;
+  std::vector<std::vector<Cell>> ambiguous(levels + 1);  // per level, the cells split further
   for (int level = levels; level >= 0; --level) {
     const double size = voxel * (1 << level);
     std::vector<std::uint8_t> decision(cells.size());
@@ -469,23 +694,22 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views, const VisualH
     std::vector<Cell> next;
     for (std::size_t c = 0; c < cells.size(); ++c) {
       if (decision[c] != static_cast<std::uint8_t>(CellClass::kAmbiguous)) continue;
-      if (level == 0) {
-        surface.push_back(cells[c]);
-        continue;
-      }
+      ambiguous[level].push_back(cells[c]);
+      if (level == 0) continue;
       for (int d = 0; d < 8; ++d)
         next.emplace_back(2 * cells[c].x() + (d & 1), 2 * cells[c].y() + ((d >> 1) & 1),
                           2 * cells[c].z() + ((d >> 2) & 1));
     }
-    CAROUSEL_THROW_IF(
-        next.size() > 8 * options.max_surface_cells || surface.size() > options.max_surface_cells,
-        InvalidArgument,
-        "the visual hull at " << voxel * 1e3 << " mm voxels needs more than "
-                              << options.max_surface_cells
-                              << " surface cells; choose a coarser resolution");
+    CAROUSEL_THROW_IF(next.size() > 8 * options.max_surface_cells ||
+                          ambiguous[0].size() > options.max_surface_cells,
+                      InvalidArgument,
+                      "the visual hull at " << voxel * 1e3 << " mm voxels needs more than "
+                                            << options.max_surface_cells
+                                            << " surface cells; choose a coarser resolution");
     cells.swap(next);
     progress.Report(static_cast<double>(levels - level + 1) / (levels + 1));
   }
+  const std::vector<Cell>& surface = ambiguous[0];
   result.surface_cells = surface.size();
   progress.EndStage();
   result.seconds_carve = stopwatch.ElapsedSeconds();
@@ -493,199 +717,39 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views, const VisualH
   // --- the surface: field at the corners, marching tetrahedra ----------------------------------
   progress.BeginStage("visual hull: surface");
   stopwatch.Restart();
-  const std::uint64_t nx = static_cast<std::uint64_t>(result.grid.x()) + 1;
-  const std::uint64_t ny = static_cast<std::uint64_t>(result.grid.y()) + 1;
-  auto corner_key = [&](std::uint64_t i, std::uint64_t j, std::uint64_t k) {
-    return i + nx * (j + ny * k);
-  };
-  auto corner_position = [&](std::uint64_t key) {
-    const std::uint64_t i = key % nx;
-    const std::uint64_t j = (key / nx) % ny;
-    const std::uint64_t k = key / (nx * ny);
-    return Eigen::Vector3d(grid_origin + voxel * Eigen::Vector3d(static_cast<double>(i),
-                                                                 static_cast<double>(j),
-                                                                 static_cast<double>(k)));
-  };
-  std::vector<std::uint64_t> corners;
-  corners.reserve(surface.size() * 8);
-  for (const Cell& c : surface)
-    for (int d = 0; d < 8; ++d)
-      corners.push_back(
-          corner_key(c.x() + (d & 1), c.y() + ((d >> 1) & 1), c.z() + ((d >> 2) & 1)));
-  std::sort(corners.begin(), corners.end());
-  corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
-  result.corners_evaluated = corners.size();
-  std::vector<double> field(corners.size());
-  ParallelFor(corners.size(), 8192, threads, [&](std::size_t begin, std::size_t end) {
-    progress.CheckCancelled();
-    for (std::size_t i = begin; i < end; ++i) {
-      const Eigen::Vector3d x = corner_position(corners[i]);
-      double f = carver.Field(x, -voxel);
-      // Closed at the grid's border (and at the floor, the grid's bottom when there is one).
-      f = std::min({f, (x - result.box.min()).minCoeff() - 0.5 * voxel,
-                    (result.box.max() - x).minCoeff() - 0.5 * voxel});
-      if (on_floor) f = std::min(f, x.z() - options.floor_z_m);
-      if (f == 0.0) f = -1e-9 * voxel;  // the zero set stays off the corners
-      field[i] = f;
-    }
-  });
-  progress.Report(0.5);
-  auto lookup = [&](std::uint64_t key) {
-    const auto it = std::lower_bound(corners.begin(), corners.end(), key);
-    return static_cast<std::size_t>(it - corners.begin());
-  };
-  // Triangles as edge keys (corner key * 8 + direction code); vertices are made per edge.
-  struct Chunk {
-    std::vector<std::array<std::uint64_t, 3>> triangles;
-    std::vector<Eigen::Vector3d> outward;
-    std::vector<Vertex> vertices;
-  };
-  const std::size_t chunk_size = 16384;
-  std::vector<Chunk> chunks((surface.size() + chunk_size - 1) / chunk_size);
-  ParallelFor(surface.size(), chunk_size, threads, [&](std::size_t begin, std::size_t end) {
-    progress.CheckCancelled();
-    Chunk& chunk = chunks[begin / chunk_size];
-    for (std::size_t s = begin; s < end; ++s) {
-      const Cell& c = surface[s];
-      std::array<std::uint64_t, 8> key{};
-      std::array<double, 8> value{};
-      std::array<Eigen::Vector3d, 8> position;
-      for (int d = 0; d < 8; ++d) {
-        key[d] = corner_key(c.x() + (d & 1), c.y() + ((d >> 1) & 1), c.z() + ((d >> 2) & 1));
-        value[d] = field[lookup(key[d])];
-        position[d] = corner_position(key[d]);
-      }
-      auto edge = [&](int a, int b) {
-        if (a > b) std::swap(a, b);  // corner b has coordinates >= corner a
-        const std::uint64_t code = static_cast<std::uint64_t>(b - a);  // 1..7, unique per offset
-        const std::uint64_t k = key[a] * 8 + code;
-        // Clamped away from the corners: no coincident vertices, no zero-area triangles.
-        const double t = std::clamp(value[a] / (value[a] - value[b]), 1e-3, 1.0 - 1e-3);
-        chunk.vertices.push_back({k, position[a] + t * (position[b] - position[a])});
-        return k;
-      };
-      auto emit = [&](std::uint64_t e0, std::uint64_t e1, std::uint64_t e2,
-                      const Eigen::Vector3d& inside, const Eigen::Vector3d& outside) {
-        // Orientation is fixed in the merge below, from the direction inside -> outside.
-        chunk.triangles.push_back({e0, e1, e2});
-        chunk.outward.push_back(outside - inside);
-      };
-      for (const auto& tet : kTetrahedra) {
-        std::array<int, 4> in{}, out{};
-        int n_in = 0;
-        int n_out = 0;
-        Eigen::Vector3d centre_in = Eigen::Vector3d::Zero();
-        Eigen::Vector3d centre_out = Eigen::Vector3d::Zero();
-        for (const int corner : tet) {
-          if (value[corner] > 0.0) {
-            in[n_in++] = corner;
-            centre_in += position[corner];
-          } else {
-            out[n_out++] = corner;
-            centre_out += position[corner];
-          }
-        }
-        if (n_in == 0 || n_out == 0) continue;
-        centre_in /= n_in;
-        centre_out /= n_out;
-        if (n_in == 1 || n_out == 1) {
-          const int apex = n_in == 1 ? in[0] : out[0];
-          const auto& others = n_in == 1 ? out : in;
-          const std::uint64_t e0 = edge(apex, others[0]);
-          const std::uint64_t e1 = edge(apex, others[1]);
-          const std::uint64_t e2 = edge(apex, others[2]);
-          emit(e0, e1, e2, centre_in, centre_out);
-        } else {
-          const std::uint64_t e0 = edge(in[0], out[0]);
-          const std::uint64_t e1 = edge(in[0], out[1]);
-          const std::uint64_t e2 = edge(in[1], out[1]);
-          const std::uint64_t e3 = edge(in[1], out[0]);
-          emit(e0, e1, e2, centre_in, centre_out);
-          emit(e0, e2, e3, centre_in, centre_out);
-        }
-      }
-    }
-  });
-  // Merge: unique vertices by edge key; triangles oriented so their normal points outwards.
-  std::vector<Vertex> vertices;
-  std::vector<std::array<std::uint64_t, 3>> triangle_keys;
-  std::vector<Eigen::Vector3d> outward;
-  for (Chunk& chunk : chunks) {
-    vertices.insert(vertices.end(), chunk.vertices.begin(), chunk.vertices.end());
-    triangle_keys.insert(triangle_keys.end(), chunk.triangles.begin(), chunk.triangles.end());
-    outward.insert(outward.end(), chunk.outward.begin(), chunk.outward.end());
-    chunk = Chunk();
-  }
-  std::sort(vertices.begin(), vertices.end(),
-            [](const Vertex& a, const Vertex& b) { return a.key < b.key; });
-  vertices.erase(std::unique(vertices.begin(), vertices.end(),
-                             [](const Vertex& a, const Vertex& b) { return a.key == b.key; }),
-                 vertices.end());
-  auto vertex_index = [&](std::uint64_t key) {
-    return static_cast<int>(
-        std::lower_bound(vertices.begin(), vertices.end(), key,
-                         [](const Vertex& v, std::uint64_t k) { return v.key < k; }) -
-        vertices.begin());
-  };
-  std::vector<std::array<int, 3>> triangles(triangle_keys.size());
-  ParallelFor(triangles.size(), 65536, threads, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t t = begin; t < end; ++t) {
-      std::array<int, 3> tri{vertex_index(triangle_keys[t][0]), vertex_index(triangle_keys[t][1]),
-                             vertex_index(triangle_keys[t][2])};
-      const Eigen::Vector3d n = (vertices[tri[1]].position - vertices[tri[0]].position)
-                                    .cross(vertices[tri[2]].position - vertices[tri[0]].position);
-      if (n.dot(outward[t]) < 0.0) std::swap(tri[1], tri[2]);
-      triangles[t] = tri;
-    }
-  });
-  triangle_keys.clear();
-  progress.Report(0.8);
-
-  // Largest component (union-find over vertices), then the OpenMesh mesh.
-  std::vector<int> parent(vertices.size());
-  std::iota(parent.begin(), parent.end(), 0);
-  auto find = [&](int x) {
-    while (parent[x] != x) {
-      parent[x] = parent[parent[x]];
-      x = parent[x];
-    }
-    return x;
-  };
-  for (const auto& t : triangles) {
-    const int a = find(t[0]);
-    parent[find(t[1])] = a;
-    parent[find(t[2])] = a;
-  }
-  std::vector<std::size_t> faces_per_root(vertices.size(), 0);
-  for (const auto& t : triangles) ++faces_per_root[find(t[0])];
-  const auto largest =
-      std::max_element(faces_per_root.begin(), faces_per_root.end()) - faces_per_root.begin();
-  for (std::size_t r = 0; r < faces_per_root.size(); ++r)
-    if (faces_per_root[r] > 0 && static_cast<std::ptrdiff_t>(r) != largest) {
-      ++result.components_dropped;
-      result.faces_dropped += faces_per_root[r];
-    }
-  if (triangles.empty())
+  GridFrame frame;
+  frame.origin = grid_origin;
+  frame.voxel = voxel;
+  frame.grid = result.grid;
+  frame.box = result.box;
+  frame.on_floor = on_floor;
+  frame.floor_z = options.floor_z_m;
+  Contour contour = ContourCells(surface, 0, frame, carver, threads, progress);
+  if (contour.mesh.n_faces() == 0)
     throw FormatError(MasksLocation(views), "the visual hull has no surface at " +
                                                 std::to_string(voxel * 1e3) +
                                                 " mm voxels (the object is thinner than a voxel)");
-  std::vector<int> remap(vertices.size(), -1);
-  Mesh& mesh = result.mesh;
-  for (const auto& t : triangles) {
-    if (find(t[0]) != largest) continue;
-    std::array<Mesh::VertexHandle, 3> handles;
-    for (int k = 0; k < 3; ++k) {
-      if (remap[t[k]] < 0) {
-        const auto& p = vertices[t[k]].position;
-        remap[t[k]] = mesh.add_vertex(Mesh::Point(p.x(), p.y(), p.z())).idx();
+  result.mesh = std::move(contour.mesh);
+  result.corners_evaluated = contour.corners;
+  result.components_dropped = contour.components_dropped;
+  result.faces_dropped = contour.faces_dropped;
+  result.volume_m3 = SignedVolume(result.mesh);
+  // A coarser contour of the same field, for the mesh optimization of a large hull.
+  if (options.proxy_max_faces > 0 && result.mesh.n_faces() > options.proxy_max_faces) {
+    const double faces_per_cell =
+        static_cast<double>(result.mesh.n_faces()) / static_cast<double>(surface.size());
+    int level = 1;
+    while (level<levels&& static_cast<double>(ambiguous[level].size()) *
+                 faces_per_cell> static_cast<double>(options.proxy_max_faces))
+      ++level;
+    if (level <= levels && !ambiguous[level].empty()) {
+      Contour coarse = ContourCells(ambiguous[level], level, frame, carver, threads, progress);
+      if (coarse.mesh.n_faces() > 0) {
+        result.proxy = std::move(coarse.mesh);
+        result.proxy_level = level;
       }
-      handles[k] = Mesh::VertexHandle(remap[t[k]]);
     }
-    const auto face = mesh.add_face(handles[0], handles[1], handles[2]);
-    CAROUSEL_CHECK(face.is_valid(), "marching tetrahedra produced a non-manifold triangle");
   }
-  mesh.RecomputeNormals();
-  result.volume_m3 = SignedVolume(mesh);
   progress.EndStage();
   result.seconds_surface = stopwatch.ElapsedSeconds();
   if (result.components_dropped > 0)

@@ -96,6 +96,51 @@ TEST_P(HullOnScene, ContainsTheObject) {
 }
 INSTANTIATE_TEST_SUITE_P(Scenes, HullOnScene, ::testing::Values("shoe", "bottle", "ring"));
 
+// A large hull also gets a coarser contour of the same field; optimizing that proxy (what the
+// studio does) meets the bounds against the full hull.
+TEST(VisualHullTest, ProxyOfALargeHullOptimizesLikeTheHull) {
+  const sim::SimViews& capture = testing::SimulatedCapture("bottle");
+  const std::vector<View> views = WithComputedMasks(capture);
+  VisualHullOptions options;
+  options.resolution = 160;
+  options.proxy_max_faces = 20000;
+  Progress progress;
+  const VisualHullResult hull = ComputeVisualHull(views, options, progress);
+  ASSERT_GT(hull.mesh.n_faces(), 20000u);
+  ASSERT_GE(hull.proxy_level, 1);
+  EXPECT_LT(hull.proxy.n_faces(), hull.mesh.n_faces() / 2);
+  EXPECT_EQ(&hull.OptimizationInput(), &hull.proxy);
+  ExpectClosedManifold(hull.proxy);
+  MeshOptimizationOptions mesh_options;
+  mesh_options.target_faces = 3000;
+  mesh_options.target_volume_m3 = hull.volume_m3;
+  const MeshOptimizationResult optimized =
+      OptimizeMesh(hull.OptimizationInput(), mesh_options, progress);
+  EXPECT_NEAR(static_cast<double>(optimized.mesh.n_faces()), 3000.0, 30.0);
+  EXPECT_TRUE(FindSelfIntersections(optimized.mesh, 1).empty());
+  const SurfaceDistance d = MeasureSurfaceDistance(optimized.mesh, hull.mesh, 5000);
+  EXPECT_LE(d.mean_a_to_b, 0.5 * hull.voxel_size_m);
+  EXPECT_NEAR(optimized.volume_m3 / hull.volume_m3, 1.0, 0.01);
+}
+
+// The automatic voxel: voxel_px pixels of the sharpest view, but never more than
+// max_resolution voxels along the object's longest side.
+TEST(VisualHullTest, AutomaticVoxelIsCappedByMaxResolution) {
+  const sim::SimViews& capture = testing::SimulatedCapture("sphere");
+  const std::vector<View> views = WithMasks(capture, capture.truth_masks);
+  Progress progress;
+  VisualHullOptions options;
+  options.voxel_px = 2.0;
+  const double by_pixels = ComputeVisualHull(views, options, progress).voxel_size_m;
+  options.max_resolution = 40;
+  const VisualHullResult capped = ComputeVisualHull(views, options, progress);
+  EXPECT_LT(by_pixels, 0.25 / 40);
+  // The longest side of the carved box: the object's 25 cm and a coarse cell of margin.
+  EXPECT_GE(capped.voxel_size_m, 0.25 / 40);
+  EXPECT_LE(capped.voxel_size_m, 0.30 / 40);
+  ExpectClosedManifold(capped.mesh);
+}
+
 // A view whose frame cuts the object off must not carve away what it does not see.
 TEST(VisualHullTest, ViewsThatSeePartOfTheObjectDoNotCarveTheRest) {
   const sim::SimViews& capture = testing::SimulatedCapture("sphere");

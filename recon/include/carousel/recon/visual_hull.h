@@ -34,8 +34,13 @@ struct VisualHullOptions {
   // Voxels along the longest side of the object's bounding box; 0 = use voxel_px. 16..4096.
   int resolution = 0;
   // Automatic voxel size: a voxel at the object's centre spans this many pixels in the view
-  // with the finest sampling, > 0.
+  // with the finest sampling, > 0 ...
   double voxel_px = 2.0;
+  // ... but at most this many voxels along the longest side (16..4096). The surface is
+  // interpolated from the masks' distance maps, so voxels of several pixels still reproduce
+  // the silhouettes to about a pixel (MeasureSilhouetteAgreement): finer grids cost time and
+  // memory and only matter for the hull itself, not for the optimized mesh.
+  int max_resolution = 384;
   // The object stands on a floor (the turntable top) at z = floor_z_m: nothing below it.
   bool use_floor = true;
   double floor_z_m = 0.0;
@@ -44,6 +49,10 @@ struct VisualHullOptions {
   double min_view_consistency = 0.5;
   // Refuse resolutions whose surface would need more cells than this (memory guard).
   std::size_t max_surface_cells = 40'000'000;
+  // A hull with more faces than this also gets a coarser contour of the same field (`proxy`,
+  // from a coarser octree level) as the input of the mesh optimization, which needs far fewer
+  // faces than the hull has; 0 = never.
+  std::size_t proxy_max_faces = 250'000;
   // Worker threads; 0 = one per hardware thread.
   int threads = 0;
   void Validate() const;
@@ -51,6 +60,12 @@ struct VisualHullOptions {
 
 struct VisualHullResult {
   Mesh mesh;  // closed, manifold, outward (counter-clockwise) triangles
+  // When the hull has more than proxy_max_faces faces: the surface contoured at octree level
+  // proxy_level (cells of 2^proxy_level voxels), also closed and manifold; else empty, 0.
+  Mesh proxy;
+  int proxy_level = 0;
+  // The mesh to optimize: the proxy when there is one, else the hull.
+  const Mesh& OptimizationInput() const { return proxy_level > 0 ? proxy : mesh; }
   double voxel_size_m = 0.0;
   Eigen::AlignedBox3d box;        // the carved region
   Eigen::Vector3i grid{0, 0, 0};  // finest voxels along x, y, z
