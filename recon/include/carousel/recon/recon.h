@@ -8,9 +8,11 @@
 //                 accuracy, largest watertight component; outside an image = unknown
 //   OptimizeMesh  Taubin smoothing, isotropic remeshing, quadric decimation to a face count
 //                 (default 4,500); closed, manifold, outward-oriented Mesh
+// and MeasureSilhouetteAgreement (reprojection.h): a mesh against the masks, in pixels.
 // recon never includes calib or texture.
 #pragma once
 
 #include "carousel/recon/mesh_optimization.h"
+#include "carousel/recon/reprojection.h"
 #include "carousel/recon/silhouette.h"
 #include "carousel/recon/visual_hull.h"
