@@ -5,13 +5,18 @@
 // whole stage <= 15 s for 16 views of 5184x3456 on 2 cores).
 //
 //   recon_bench [--scene shoe|bottle|ring|sphere] [--width W] [--height H] [--stops N]
-//               [--voxel-px P] [--resolution R] [--faces F] [--method key|difference]
+//               [--voxel-px P] [--resolution R] [--max-resolution R] [--faces F] [--method
+//               key|difference]
 //               [--size-m S] [--noise SIGMA] [--jpeg Q] [--truth-masks] [--save DIR]
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <string>
+#include <utility>
+
+#include <opencv2/imgproc.hpp>
 
 #include "carousel/core/image_io.h"
 #include "carousel/core/mesh_io.h"
@@ -51,6 +56,7 @@ int main(int argc, char** argv) {
   std::string method = "key";
   std::string save;
   int width = 5184, height = 3456, stops = 16, faces = 4500, resolution = 0, jpeg = 95;
+  int max_resolution = recon::VisualHullOptions().max_resolution;
   double voxel_px = recon::VisualHullOptions().voxel_px, size_m = 0.25, noise = 1.5;
   bool truth_masks = false;
   for (int i = 1; i < argc; ++i) {
@@ -74,6 +80,8 @@ int main(int argc, char** argv) {
       voxel_px = std::stod(next());
     else if (arg == "--resolution")
       resolution = std::stoi(next());
+    else if (arg == "--max-resolution")
+      max_resolution = std::stoi(next());
     else if (arg == "--faces")
       faces = std::stoi(next());
     else if (arg == "--method")
@@ -133,6 +141,20 @@ int main(int argc, char** argv) {
       if (!save.empty()) {
         WriteImage(std::filesystem::path(save) / (sim_views.views[i].name() + "_mask.png"),
                    silhouettes.masks[i]);
+        // Where the mask is wrong, at most 1296 pixels wide: red = missed, green = extra.
+        const cv::Mat ours = silhouettes.masks[i] >= 128;
+        const cv::Mat truth = sim_views.truth_masks[i] >= 128;
+        cv::Mat diff;
+        cv::merge(std::vector<cv::Mat>{cv::Mat::zeros(ours.size(), CV_8UC1), ours & ~truth,
+                                       truth & ~ours},
+                  diff);
+        diff.setTo(cv::Scalar(60, 60, 60), ours & truth);
+        const double scale = std::min(1.0, 1296.0 / diff.cols);
+        cv::Mat small;
+        cv::resize(diff, small, cv::Size(), scale, scale, cv::INTER_AREA);
+        small.convertTo(small, CV_8UC3, 4.0);
+        WriteImage(std::filesystem::path(save) / (sim_views.views[i].name() + "_maskdiff.png"),
+                   small);
       }
     }
     std::printf("silhouettes (%s): %.2f s; IoU min %.5f (%s), mean %.5f\n", method.c_str(),
@@ -142,22 +164,25 @@ int main(int argc, char** argv) {
     recon::VisualHullOptions hull_options;
     hull_options.voxel_px = voxel_px;
     hull_options.resolution = resolution;
+    hull_options.max_resolution = max_resolution;
     stage.Restart();
     const auto hull = recon::ComputeVisualHull(sim_views.views, hull_options, progress);
     const double hull_seconds = stage.ElapsedSeconds();
     const double voxel = hull.voxel_size_m;
     std::printf(
         "visual hull: %.2f s (distance %.2f, carve %.2f, surface %.2f); voxel %.3f mm, "
-        "grid %dx%dx%d, %zu surface cells, %zu faces, %zu pieces dropped\n",
+        "grid %dx%dx%d, %zu surface cells, %zu faces, %zu pieces dropped; proxy level %d, "
+        "%zu faces\n",
         hull_seconds, hull.seconds_distance, hull.seconds_carve, hull.seconds_surface, voxel * 1e3,
         hull.grid.x(), hull.grid.y(), hull.grid.z(), hull.surface_cells, hull.mesh.n_faces(),
-        hull.components_dropped);
+        hull.components_dropped, hull.proxy_level, hull.proxy.n_faces());
 
     if (!save.empty()) WriteMesh(hull.mesh, std::filesystem::path(save) / "hull.ply");
     recon::MeshOptimizationOptions mesh_options;
     mesh_options.target_faces = faces;
     stage.Restart();
-    const auto optimized = recon::OptimizeMesh(hull.mesh, mesh_options, progress);
+    mesh_options.target_volume_m3 = hull.volume_m3;
+    const auto optimized = recon::OptimizeMesh(hull.OptimizationInput(), mesh_options, progress);
     const double mesh_seconds = stage.ElapsedSeconds();
     std::printf("mesh: %.2f s (smooth %.2f, decimate %.2f, remesh %.2f); %zu faces\n", mesh_seconds,
                 optimized.seconds_smooth, optimized.seconds_decimate, optimized.seconds_remesh,
@@ -182,6 +207,23 @@ int main(int argc, char** argv) {
         mesh_to_hull.mean_a_to_b * 1e3, mesh_to_hull.mean_a_to_b / voxel,
         mesh_to_hull.hausdorff() * 1e3, 100.0 * (optimized.volume_m3 / hull.volume_m3 - 1.0),
         topology.closed(), topology.manifold(), topology.components, intersections.size());
+    for (const auto& [label, mesh] : {std::pair<const char*, const Mesh*>{"hull", &hull.mesh},
+                                      {"optimized", &optimized.mesh}}) {
+      Stopwatch agreement_watch;
+      const auto agreement = recon::MeasureSilhouetteAgreement(*mesh, sim_views.views);
+      double worst_iou = 1.0, mean_deviation = 0.0, max_deviation = 0.0, max_mean_deviation = 0.0;
+      for (const auto& a : agreement) {
+        worst_iou = std::min(worst_iou, a.iou);
+        mean_deviation += a.mean_deviation_px / static_cast<double>(agreement.size());
+        max_mean_deviation = std::max(max_mean_deviation, a.mean_deviation_px);
+        max_deviation = std::max(max_deviation, a.max_deviation_px);
+      }
+      std::printf(
+          "%s vs silhouettes: IoU min %.5f; outline deviation mean %.2f px (worst view %.2f px), "
+          "max %.1f px (measured in %.1f s)\n",
+          label, worst_iou, mean_deviation, max_mean_deviation, max_deviation,
+          agreement_watch.ElapsedSeconds());
+    }
     const auto mesh_to_truth = MeasureSurfaceDistance(optimized.mesh, sim_views.truth_mesh, 20000);
     std::printf("optimized vs truth: Chamfer %.3f mm, Hausdorff %.3f mm\n",
                 mesh_to_truth.chamfer() * 1e3, mesh_to_truth.hausdorff() * 1e3);

@@ -197,6 +197,17 @@ int RunReconstruct(ReconstructArgs& args, std::ostream& out, std::ostream& err) 
       << result.seconds_hull << " s)\n"
       << "mesh " << (s / "recon/mesh.ply").string() << ": " << result.mesh_faces << " faces ("
       << result.seconds_mesh << " s)\n";
+  if (!result.agreement.empty()) {
+    double mean = 0.0;
+    const recon::SilhouetteAgreement* worst = &result.agreement.front();
+    for (const recon::SilhouetteAgreement& a : result.agreement) {
+      mean += a.mean_deviation_px / static_cast<double>(result.agreement.size());
+      if (a.mean_deviation_px > worst->mean_deviation_px) worst = &a;
+    }
+    out << "mesh vs silhouettes: outline deviation " << mean << " px on average, worst "
+        << worst->view << " " << worst->mean_deviation_px << " px (IoU " << std::setprecision(4)
+        << worst->iou << ")\n";
+  }
   return kExitOk;
 }
 
@@ -339,7 +350,11 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
       ->capture_default_str();
   reconstruct_command
       ->add_option("--voxel-px", reconstruct.options.hull.voxel_px,
-                   "hull voxel size in pixels of the sharpest view, when no --resolution")
+                   "hull voxel size in pixels of the sharpest view, when no --resolution ...")
+      ->capture_default_str();
+  reconstruct_command
+      ->add_option("--max-resolution", reconstruct.options.hull.max_resolution,
+                   "... but at most this many voxels along the object's longest side")
       ->capture_default_str();
   reconstruct_command
       ->add_option("--method", reconstruct.method,

@@ -97,10 +97,18 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
 
   // Optimized mesh -> recon/mesh.ply.
   watch.Restart();
-  const recon::MeshOptimizationResult mesh = recon::OptimizeMesh(hull.mesh, options.mesh, progress);
+  recon::MeshOptimizationOptions mesh_options = options.mesh;
+  mesh_options.target_volume_m3 = hull.volume_m3;
+  const recon::MeshOptimizationResult mesh =
+      recon::OptimizeMesh(hull.OptimizationInput(), mesh_options, progress);
   WriteMesh(mesh.mesh, session_folder / "recon/mesh.ply");
   result.mesh_faces = mesh.mesh.n_faces();
   result.seconds_mesh = watch.ElapsedSeconds();
+
+  // How well the mesh reproduces the silhouettes: calibration or mask trouble shows here.
+  watch.Restart();
+  result.agreement = recon::MeasureSilhouetteAgreement(mesh.mesh, views, options.hull.threads);
+  result.seconds_agreement = watch.ElapsedSeconds();
 
   session.stages["reconstruct"] = "done";
   WriteSessionManifest(session_folder, session);

@@ -6,6 +6,7 @@
 
 #include <array>
 #include <cstdio>
+#include <regex>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -173,6 +174,12 @@ TEST(CliBinaryTest, ReconstructASimulatedSession) {
       RunBinary("reconstruct " + session + " --faces 800 --resolution 64");
   ASSERT_EQ(reconstructed.code, 0) << reconstructed.out;
   EXPECT_THAT(reconstructed.out, HasSubstr("800 faces"));
+  // The mesh reproduces the silhouettes to a couple of pixels (480x320 photos, 800 faces).
+  std::smatch deviation;
+  ASSERT_TRUE(std::regex_search(reconstructed.out, deviation,
+                                std::regex("outline deviation ([0-9.]+) px on average")))
+      << reconstructed.out;
+  EXPECT_LT(std::stod(deviation[1].str()), 2.0) << reconstructed.out;
   EXPECT_TRUE(std::filesystem::exists(dir / "bottle/masks/cam0_stop03.png"));
   EXPECT_TRUE(std::filesystem::exists(dir / "bottle/recon/hull.ply"));
   EXPECT_EQ(testing::ReadBytes(dir / "bottle/images/cam0_stop03.jpg"), photo_before);

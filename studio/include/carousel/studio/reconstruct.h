@@ -12,6 +12,7 @@
 
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include "carousel/core/progress.h"
 #include "carousel/recon/recon.h"
@@ -31,9 +32,12 @@ struct ReconstructResult {
   std::size_t hull_faces = 0;
   double voxel_size_m = 0.0;
   std::size_t mesh_faces = 0;
+  // The optimized mesh against each view's silhouette (pixels).
+  std::vector<recon::SilhouetteAgreement> agreement;
   double seconds_silhouettes = 0.0;
   double seconds_hull = 0.0;
   double seconds_mesh = 0.0;
+  double seconds_agreement = 0.0;
 };
 
 // \throw IoError/FormatError naming the session file at fault, InvalidArgument, Cancelled.
