@@ -321,12 +321,66 @@ double SignedVolume(const Mesh& mesh) {
 
 Containment MeasureContainment(const Mesh& inner, const Mesh& outer, std::size_t samples) {
   const TriangleTree tree(outer);
+  // Which side of `outer` a point lies on is judged at its closest point by the angle-weighted
+  // pseudo-normal of the feature there (Baerentzen and Aanaes 2005): face, edge (the two
+  // faces' normals) or vertex (its faces' normals weighted by their angles at it). The closest
+  // face's own normal gives the wrong side near concave edges and vertices.
+  std::vector<Mesh::FaceHandle> faces;  // in the tree's triangle order
+  faces.reserve(outer.n_faces());
+  for (const auto f : outer.faces()) faces.push_back(f);
+  std::vector<Eigen::Vector3d> face_normal(outer.n_faces(), Eigen::Vector3d::Zero());
+  std::vector<Eigen::Vector3d> vertex_normal(outer.n_vertices(), Eigen::Vector3d::Zero());
+  for (std::size_t i = 0; i < faces.size(); ++i) {
+    const auto& t = tree.triangles()[i];
+    const Eigen::Vector3d n = (t.b - t.a).cross(t.c - t.a);
+    const double norm = n.norm();
+    if (norm > 0.0) face_normal[faces[i].idx()] = n / norm;
+    const std::array<Eigen::Vector3d, 3> p = {t.a, t.b, t.c};
+    int k = 0;
+    for (const auto v : outer.fv_range(faces[i])) {
+      const Eigen::Vector3d u = p[(k + 1) % 3] - p[k];
+      const Eigen::Vector3d w = p[(k + 2) % 3] - p[k];
+      const double angle = std::atan2(u.cross(w).norm(), u.dot(w));
+      vertex_normal[v.idx()] += angle * face_normal[faces[i].idx()];
+      ++k;
+    }
+  }
   Containment result;
   const auto points = SampleSurface(inner, samples, 5);
   for (const auto& p : points) {
     const auto hit = tree.ClosestPoint(p);
+    const auto face = faces[hit.triangle];
     const auto& t = tree.triangles()[hit.triangle];
-    if ((p - hit.point).dot((t.b - t.a).cross(t.c - t.a)) > 0.0)
+    // Barycentric coordinates of the closest point.
+    const Eigen::Vector3d n = (t.b - t.a).cross(t.c - t.a);
+    const double area = n.squaredNorm();
+    std::array<double, 3> bary = {1.0, 0.0, 0.0};
+    if (area > 0.0) {
+      bary[1] = (hit.point - t.a).cross(t.c - t.a).dot(n) / area;
+      bary[2] = (t.b - t.a).cross(hit.point - t.a).dot(n) / area;
+      bary[0] = 1.0 - bary[1] - bary[2];
+    }
+    constexpr double kOn = 1e-7;
+    std::array<Mesh::VertexHandle, 3> v;
+    int k = 0;
+    for (const auto vh : outer.fv_range(face)) v[k++] = vh;
+    int zeros = 0;
+    for (const double b : bary) zeros += b < kOn ? 1 : 0;
+    Eigen::Vector3d normal = face_normal[face.idx()];
+    if (zeros >= 2) {  // at a vertex
+      for (int j = 0; j < 3; ++j)
+        if (bary[j] >= kOn) normal = vertex_normal[v[j].idx()];
+    } else if (zeros == 1) {  // on an edge: the face across it as well
+      for (int j = 0; j < 3; ++j) {
+        if (bary[j] >= kOn) continue;
+        const auto h = outer.find_halfedge(v[(j + 1) % 3], v[(j + 2) % 3]);
+        if (h.is_valid()) {
+          const auto across = outer.opposite_face_handle(h);
+          if (across.is_valid()) normal += face_normal[across.idx()];
+        }
+      }
+    }
+    if ((p - hit.point).dot(normal) > 0.0)
       result.max_outside = std::max(result.max_outside, hit.distance);
     result.mean_distance += hit.distance;
   }
