@@ -149,4 +149,117 @@ Mesh MakeDisc(double radius, int segments, int rings) {
   return mesh;
 }
 
+Mesh MakeMarchingBlob(int resolution, double noise, std::uint64_t seed) {
+  CAROUSEL_THROW_IF(resolution < 4 || resolution > 512, InvalidArgument,
+                    "MakeMarchingBlob: resolution must be in 4..512, got " << resolution);
+  CAROUSEL_THROW_IF(!(noise >= 0.0), InvalidArgument, "MakeMarchingBlob: noise must be >= 0");
+  // Lobes: centre, radius, weight.
+  struct Lobe {
+    Vec3d centre;
+    double sigma;
+    double weight;
+  };
+  const std::array<Lobe, 5> lobes = {{{{0.0, 0.0, 0.0}, 0.45, 1.0},
+                                      {{0.45, 0.1, 0.1}, 0.3, 0.8},
+                                      {{-0.35, 0.3, -0.15}, 0.28, 0.8},
+                                      {{0.05, -0.4, 0.3}, 0.25, 0.7},
+                                      {{-0.1, 0.05, -0.5}, 0.22, 0.7}}};
+  const int n = resolution + 1;
+  const double h = 2.0 / resolution;
+  std::uint64_t state = seed * 0x9E3779B97F4A7C15ull + 1;  // xorshift64
+  auto next_random = [&]() {
+    state ^= state << 13;
+    state ^= state >> 7;
+    state ^= state << 17;
+    return static_cast<double>(state >> 11) * (1.0 / 9007199254740992.0);
+  };
+  auto corner = [&](int i, int j, int k) { return Vec3d(-1 + i * h, -1 + j * h, -1 + k * h); };
+  std::vector<double> field(static_cast<std::size_t>(n) * n * n);
+  auto index = [&](int i, int j, int k) { return (static_cast<std::size_t>(k) * n + j) * n + i; };
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) {
+        const Vec3d x = corner(i, j, k);
+        double f = -0.5;
+        for (const Lobe& lobe : lobes)
+          f += lobe.weight * std::exp(-(x - lobe.centre).sqrnorm() / (2 * lobe.sigma * lobe.sigma));
+        // Noise in the field: bumps of up to about `noise` cells (the field's slope at the
+        // surface is about 1.5 per unit length), deterministic per corner.
+        f += noise * h * 1.5 * (2.0 * next_random() - 1.0);
+        if (f == 0.0) f = -1e-12;
+        field[index(i, j, k)] = f;
+      }
+  // Marching tetrahedra: the six Freudenthal tetrahedra of each cube, a vertex per edge that
+  // changes sign (keyed by the edge's first corner and direction).
+  constexpr std::array<std::array<int, 4>, 6> kTets = {
+      {{0, 1, 3, 7}, {0, 1, 5, 7}, {0, 2, 3, 7}, {0, 2, 6, 7}, {0, 4, 5, 7}, {0, 4, 6, 7}}};
+  Mesh mesh;
+  std::map<std::uint64_t, VertexHandle> vertex_of_edge;
+  for (int k = 0; k < resolution; ++k)
+    for (int j = 0; j < resolution; ++j)
+      for (int i = 0; i < resolution; ++i) {
+        std::array<double, 8> value{};
+        std::array<Vec3d, 8> position;
+        std::array<std::uint64_t, 8> key{};
+        bool inside = false;
+        bool outside = false;
+        for (int d = 0; d < 8; ++d) {
+          const int ci = i + (d & 1);
+          const int cj = j + ((d >> 1) & 1);
+          const int ck = k + ((d >> 2) & 1);
+          value[d] = field[index(ci, cj, ck)];
+          position[d] = corner(ci, cj, ck);
+          key[d] = index(ci, cj, ck);
+          (value[d] > 0 ? inside : outside) = true;
+        }
+        if (!inside || !outside) continue;
+        auto edge = [&](int a, int b) {
+          if (a > b) std::swap(a, b);
+          const std::uint64_t edge_key = key[a] * 8 + static_cast<std::uint64_t>(b - a);
+          const auto it = vertex_of_edge.find(edge_key);
+          if (it != vertex_of_edge.end()) return it->second;
+          const double t = value[a] / (value[a] - value[b]);
+          const VertexHandle v = mesh.add_vertex(position[a] + t * (position[b] - position[a]));
+          vertex_of_edge.emplace(edge_key, v);
+          return v;
+        };
+        auto emit = [&](VertexHandle a, VertexHandle b, VertexHandle c, const Vec3d& towards_out) {
+          const Vec3d normal = (mesh.point(b) - mesh.point(a)) % (mesh.point(c) - mesh.point(a));
+          if ((normal | towards_out) < 0) std::swap(b, c);
+          AddTriangle(mesh, a, b, c);
+        };
+        for (const auto& tet : kTets) {
+          std::array<int, 4> in{}, out{};
+          int n_in = 0;
+          int n_out = 0;
+          Vec3d centre_in(0, 0, 0), centre_out(0, 0, 0);
+          for (const int c : tet) {
+            if (value[c] > 0) {
+              in[n_in++] = c;
+              centre_in += position[c];
+            } else {
+              out[n_out++] = c;
+              centre_out += position[c];
+            }
+          }
+          if (n_in == 0 || n_out == 0) continue;
+          const Vec3d towards_out = centre_out / n_out - centre_in / n_in;
+          if (n_in == 1 || n_out == 1) {
+            const int apex = n_in == 1 ? in[0] : out[0];
+            const auto& others = n_in == 1 ? out : in;
+            emit(edge(apex, others[0]), edge(apex, others[1]), edge(apex, others[2]), towards_out);
+          } else {
+            const VertexHandle e0 = edge(in[0], out[0]);
+            const VertexHandle e1 = edge(in[0], out[1]);
+            const VertexHandle e2 = edge(in[1], out[1]);
+            const VertexHandle e3 = edge(in[1], out[0]);
+            emit(e0, e1, e2, towards_out);
+            emit(e0, e2, e3, towards_out);
+          }
+        }
+      }
+  mesh.RecomputeNormals();
+  return mesh;
+}
+
 }  // namespace carousel

@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <csignal>
 #include <cstdlib>
 #include <iomanip>
@@ -12,14 +13,18 @@
 #include <CLI/CLI.hpp>
 
 #include "carousel/core/error.h"
+#include "carousel/core/image_io.h"
 #include "carousel/core/logging.h"
+#include "carousel/core/mesh_io.h"
 #include "carousel/core/progress.h"
+#include "carousel/core/timer.h"
 #include "carousel/core/version.h"
 #include "carousel/studio/import.h"
 #include "carousel/studio/reconstruct.h"
 #include "carousel/studio/self_check.h"
 #include "carousel/studio/sim_capture.h"
 #include "carousel/studio/terminal_progress.h"
+#include "carousel/texture/atlas.h"
 
 namespace carousel::studio {
 namespace {
@@ -33,8 +38,6 @@ struct PlannedCommand {
 };
 
 constexpr PlannedCommand kPlannedCommands[] = {
-    {"texture", "texture atlas and texture map of a session's mesh; export OBJ and GLB",
-     "issues 5 and 6 (texture atlas, texture transfer)"},
     {"process", "run every processing stage of one or more sessions", "issue 9 (studio pipeline)"},
     {"run", "the one-button session: capture, reconstruct, texture, export",
      "issue 9 (studio pipeline)"},
@@ -211,6 +214,47 @@ int RunReconstruct(ReconstructArgs& args, std::ostream& out, std::ostream& err) 
   return kExitOk;
 }
 
+struct AtlasArgs {
+  texture::AtlasOptions options;
+  std::filesystem::path mesh;
+  std::filesystem::path out;
+  std::filesystem::path charts_image;
+  std::string packing = "obb";
+};
+
+int RunTextureAtlas(AtlasArgs& args, std::ostream& out, std::ostream& err) {
+  args.options.packing.mode = texture::ParsePackingMode(args.packing);
+  CliProgress cli(err);
+  Mesh mesh = ReadMesh(args.mesh, {.read_uvs = false});
+  Stopwatch total;
+  const texture::AtlasResult result = texture::BuildAtlas(&mesh, args.options, cli.progress);
+  const double seconds = total.ElapsedSeconds() - result.seconds_quality;
+  WriteMesh(mesh, args.out);
+  if (!args.charts_image.empty())
+    WriteImage(args.charts_image,
+               texture::DrawCharts(mesh, std::min(args.options.packing.size, 4096)));
+  const texture::AtlasQuality& q = result.quality;
+  out << std::fixed << std::setprecision(3) << "atlas " << args.out.string() << ": "
+      << mesh.n_faces() << " faces, " << q.charts << " charts (" << result.charts_split
+      << " split to flatten validly), " << texture::PackingModeName(args.options.packing.mode)
+      << " packing in " << args.options.packing.size << "x" << args.options.packing.size << "\n"
+      << "stretch: L2 " << std::setprecision(4) << q.l2_stretch << " (worst face "
+      << std::setprecision(2) << q.max_face_stretch << "), angle distortion "
+      << q.angle_distortion_deg << " deg\n"
+      << "utilization " << std::setprecision(1) << 100.0 * q.utilization << " %, "
+      << std::setprecision(0) << q.texels_per_metre << " texels per metre\n"
+      << std::setprecision(3) << "time " << seconds << " s: charts " << result.seconds_charts
+      << " s, flattening " << result.seconds_parameterization << " s, packing "
+      << result.seconds_packing << " s\n";
+  if (!q.Valid()) {
+    err << "carousel texture atlas: the atlas failed its checks (flipped " << q.flipped_faces
+        << ", overlapping texels " << q.overlapping_texels << ", gutter " << q.gutter_violations
+        << ")\n";
+    return kExitFailure;
+  }
+  return kExitOk;
+}
+
 int RunSelfCheckCommand(const SelfCheckOptions& options, std::ostream& out, std::ostream& err) {
   CliProgress cli(err);
   const SelfCheckResult result = RunSelfCheck(options, cli.progress);
@@ -366,6 +410,26 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
                    "turntable plate radius to remove from the silhouettes (0 = none)")
       ->capture_default_str();
 
+  // carousel texture atlas (the session texturing of issue 6 comes later)
+  AtlasArgs atlas;
+  CLI::App* texture_command =
+      app.add_subcommand("texture", "texture atlas and texture map of a session's mesh");
+  texture_command->require_subcommand(0, 1);
+  texture_command->allow_extras();
+  CLI::App* atlas_command = texture_command->add_subcommand(
+      "atlas", "charts, flattening and packing of a mesh: an OBJ with UVs");
+  atlas_command->add_option("mesh", atlas.mesh, "mesh file (OBJ, PLY, OFF)")->required();
+  atlas_command->add_option("--out", atlas.out, "output OBJ with UVs")->required();
+  atlas_command->add_option("--seeds", atlas.options.charts.seeds, "chart growth seeds")
+      ->capture_default_str();
+  atlas_command->add_option("--packing", atlas.packing, "obb or aabb")->capture_default_str();
+  atlas_command->add_option("--size", atlas.options.packing.size, "atlas size in texels")
+      ->capture_default_str();
+  atlas_command
+      ->add_option("--gutter", atlas.options.packing.gutter_texels, "texels between charts")
+      ->capture_default_str();
+  atlas_command->add_option("--charts-image", atlas.charts_image, "PNG of the charts");
+
   std::vector<CLI::App*> planned;
   for (const PlannedCommand& command : kPlannedCommands) {
     CLI::App* sub = app.add_subcommand(command.name, command.summary);
@@ -401,6 +465,12 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
     if (capture->parsed()) return RunSimCapture(sim_capture, out, err);
     if (import_command->parsed()) return RunImport(import_args, out, err);
     if (reconstruct_command->parsed()) return RunReconstruct(reconstruct, out, err);
+    if (atlas_command->parsed()) return RunTextureAtlas(atlas, out, err);
+    if (texture_command->parsed()) {
+      err << "carousel texture: not built yet for sessions (see issue 6, texture transfer); "
+             "`carousel texture atlas MESH --out OUT.obj` is\n";
+      return kExitUnavailable;
+    }
     err << "carousel: no subcommand\n";
     return kExitUsage;
   } catch (const std::exception& e) {

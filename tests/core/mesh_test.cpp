@@ -71,6 +71,21 @@ TEST(MeshTest, ClosedPrimitivesAreWatertightAndOutward) {
   EXPECT_NEAR(SignedVolume(cylinder), cylinder_volume, 0.01 * cylinder_volume);
 }
 
+// The marching-cubes blob: closed, outward, about 15 r^2 faces, deterministic; field noise
+// changes it (bumps) but keeps it closed.
+TEST(MeshTest, MarchingBlobIsClosedOutwardAndDeterministic) {
+  const Mesh blob = MakeMarchingBlob(24, 0.0, 1);
+  EXPECT_EQ(BoundaryEdges(blob), 0u);
+  EXPECT_GT(SignedVolume(blob), 0.1);
+  EXPECT_GT(blob.n_faces(), 10u * 24u * 24u);
+  EXPECT_LT(blob.n_faces(), 20u * 24u * 24u);
+  const Mesh noisy = MakeMarchingBlob(24, 0.3, 1);
+  EXPECT_EQ(BoundaryEdges(noisy), 0u);
+  EXPECT_NE(noisy.n_faces(), blob.n_faces());
+  EXPECT_EQ(MakeMarchingBlob(24, 0.3, 1).n_faces(), noisy.n_faces());
+  EXPECT_THROW(MakeMarchingBlob(2, 0.1, 1), InvalidArgument);
+}
+
 TEST(MeshTest, DiscHasOneBoundaryLoopAndFacesUp) {
   Mesh disc = MakeDisc(0.1, 32, 4);
   EXPECT_EQ(BoundaryEdges(disc), 32u);

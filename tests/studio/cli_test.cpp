@@ -160,6 +160,27 @@ TEST(CliBinaryTest, SimCaptureAndImportFromTheExecutable) {
 namespace carousel::studio {
 namespace {
 
+// The texture atlas of a shared model: an OBJ with UVs, the figures printed, bad input
+// refused with the exit code of its kind.
+TEST(CliBinaryTest, TextureAtlasOfAMesh) {
+  testing::TempDir dir;
+  const std::string duck = testing::SharedDataFile("models/Duck/obj_derived/Duck.obj").string();
+  const std::string out = (dir / "duck.obj").string();
+  const CliResult atlas = RunBinary("texture atlas " + duck + " --out " + out +
+                                    " --size 512 --charts-image " + (dir / "charts.png").string());
+  ASSERT_EQ(atlas.code, 0) << atlas.out;
+  EXPECT_THAT(atlas.out, HasSubstr("charts"));
+  EXPECT_THAT(atlas.out, HasSubstr("utilization"));
+  const Mesh mesh = ReadMesh(dir / "duck.obj");
+  EXPECT_TRUE(mesh.has_uvs());
+  EXPECT_EQ(mesh.n_faces(), ReadMesh(duck).n_faces());
+  EXPECT_TRUE(std::filesystem::exists(dir / "charts.png"));
+  EXPECT_EQ(RunBinary("texture atlas " + duck + " --out " + out + " --packing round").code,
+            kExitUsage);
+  EXPECT_EQ(RunBinary("texture atlas " + (dir / "missing.obj").string() + " --out " + out).code,
+            kExitIoError);
+}
+
 // The reconstruction stage on a small simulated session: masks, hull and mesh appear, the
 // manifest records them, the photos are untouched; bad input is refused with a clear error.
 TEST(CliBinaryTest, ReconstructASimulatedSession) {

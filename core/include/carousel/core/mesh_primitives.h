@@ -3,6 +3,8 @@
 // (the disc), with normals computed.
 #pragma once
 
+#include <cstdint>
+
 #include "carousel/core/mesh.h"
 
 namespace carousel {
@@ -22,5 +24,13 @@ Mesh MakeCylinder(double radius, double height, int segments, int rings);
 // Open disc in the z = 0 plane facing +Z, `rings` concentric rings of `segments` (one boundary
 // loop). \throw InvalidArgument.
 Mesh MakeDisc(double radius, int segments, int rings);
+
+// A lumpy closed blob (a sum of Gaussian lobes, about 1.6 m across) contoured by marching
+// tetrahedra on a resolution^3 grid: the kind of mesh a reconstruction produces, with
+// irregular triangles and slivers where the surface passes close to grid corners. `noise` adds
+// random bumps to the field (up to about that many cells; seeded, deterministic), which can
+// also leave small bubbles. About 15 * resolution^2 faces. \throw InvalidArgument (resolution
+// outside 4..512, noise < 0).
+Mesh MakeMarchingBlob(int resolution, double noise = 0.1, std::uint64_t seed = 1);
 
 }  // namespace carousel

@@ -1,0 +1,57 @@
+// Chart growth partitioning (texture paper, section 1): the mesh cut into disk-like charts,
+// each as flat and compact as it can be, ready to be flattened.
+//
+// Seeds (faces) grow into charts through a priority queue ordered by
+//   Cost1(F, F') = (1 - N_C . N_F') |P_F' - P_F|        (+ compactness, below)
+// with N_C the chart's mean (area-weighted) normal, N_F' the candidate's normal and P the face
+// centroids. A face joins a chart only if the chart stays a topological disk (one boundary
+// loop, no pinched vertex; checked in O(valence) per face) and, as our extension, only if its
+// normal lies within max_normal_deviation_deg of the chart's: flat charts flatten with little
+// stretch. Faces no chart can take become new seeds. Seed upgrade: each chart is peeled from
+// its boundary inward in rings (Dijkstra over face centroids, Cost2 = |P_F' - P_F|); the face
+// of the last ring is its new seed; all charts regrow from the new seeds until no seed moves.
+// Costs are evaluated lazily: an entry whose chart normal changed since it was queued is
+// re-queued with its current cost when it reaches the top of the heap.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "carousel/core/mesh.h"
+#include "carousel/core/progress.h"
+
+namespace carousel::texture {
+
+struct ChartOptions {
+  // Initial seeds (the paper's default: 10), >= 1.
+  int seeds = 10;
+  // A face joins a chart only if its normal is within this angle of the chart's mean normal,
+  // degrees, (0, 180]; 180 = the paper's unbounded growth.
+  double max_normal_deviation_deg = 70.0;
+  // Weight of the distance from the chart's seed in the growth cost (relative to the chart
+  // size the seed count implies), >= 0: keeps charts round, so they pack tightly.
+  double compactness = 0.05;
+  // Seed upgrades at most, >= 0 (0: grow once from the initial seeds).
+  int max_iterations = 8;
+  // Random seed of the initial seed choice (deterministic results).
+  std::uint64_t random_seed = 1;
+  void Validate() const;
+};
+
+struct ChartsResult {
+  std::vector<int> chart_of_face;  // per face, 0 .. charts - 1
+  int charts = 0;
+  int iterations = 0;      // growths run (1 + seed upgrades)
+  bool converged = false;  // the seeds stopped moving
+  double seconds = 0.0;
+};
+
+// \pre a triangle mesh with at least one face.
+// \throw InvalidArgument (options, empty mesh), Cancelled.
+ChartsResult ComputeCharts(const Mesh& mesh, const ChartOptions& options, Progress& progress);
+
+// Boundary loops of each chart (0 for a closed chart, 1 for a disk). For tests and checks.
+std::vector<int> CountChartBoundaryLoops(const Mesh& mesh, const std::vector<int>& chart_of_face,
+                                         int charts);
+
+}  // namespace carousel::texture

@@ -1,0 +1,51 @@
+// Chart packing (texture paper, section 3): flattened charts placed in one square atlas.
+//
+// Every chart gets the same texel density (texels per metre of surface; the flattened charts
+// are area-preserving, in metres). In OBB mode each chart is turned into its minimum-area
+// oriented bounding box (rotating calipers over its convex hull, OpenCV's minAreaRect); in
+// AABB mode it keeps its orientation (the paper's comparison). The boxes, each grown by the
+// gutter, are packed by a skyline bottom-left packer (largest first, each box tried in both
+// orientations), and the density is the largest that fits the atlas (bisection). Charts are
+// at least `gutter_texels` apart, so dilating each chart's texels by half the gutter (for
+// bilinear filtering and mip levels) never reaches another chart.
+#pragma once
+
+#include <array>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "carousel/core/progress.h"
+
+namespace carousel::texture {
+
+enum class PackingMode { kObb, kAabb };
+// "obb" / "aabb". \throw InvalidArgument for other names.
+PackingMode ParsePackingMode(const std::string& name);
+const char* PackingModeName(PackingMode mode);
+
+struct PackingOptions {
+  PackingMode mode = PackingMode::kObb;
+  // Atlas width and height in texels, 64..32768.
+  int size = 4096;
+  // Empty texels between two charts (and between a chart and the atlas border, half of it),
+  // 0..64. 8 keeps bilinear filtering clean down to the third mip level (1/4 size).
+  int gutter_texels = 8;
+  void Validate() const;
+};
+
+struct PackingResult {
+  std::vector<std::array<Eigen::Vector2d, 3>> uv;  // per face, per corner, in [0, 1], v up
+  double texels_per_metre = 0.0;                   // the common density
+  double utilization = 0.0;                        // chart area / atlas area
+  double seconds = 0.0;
+};
+
+// `uv`: per face, per corner, flattened positions in metres; `chart_of_face`: 0 .. charts - 1.
+// \throw InvalidArgument (options, sizes), Cancelled.
+PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
+                         const std::vector<int>& chart_of_face, int charts,
+                         const PackingOptions& options, Progress& progress);
+
+}  // namespace carousel::texture

@@ -1,0 +1,60 @@
+// Chart flattening (texture paper, section 2): each chart mapped to the plane with its angles
+// kept as close to the surface's as the constraints allow.
+//
+// ABF++ (Sheffer, Levy, Mogilnitsky, Bogomyakov 2005): unknown 2D angles alpha per triangle
+// corner minimise sum w (alpha - beta)^2, w = 1 / beta^2, beta the 3D angles (those around an
+// interior vertex scaled to sum to 2 pi), subject to
+//   triangle consistency   alpha_1 + alpha_2 + alpha_3 = pi             per triangle
+//   vertex consistency     sum of the alphas around v = 2 pi           per interior vertex
+//   wheel consistency      sum log sin(alpha_next) = sum log sin(alpha_prev)  per interior v
+// solved by Newton (SQP) steps in which the triangle constraints are eliminated analytically
+// (their block is diagonal) and the remaining Schur complement, 2 x interior vertices square,
+// is factorised by Eigen's sparse Cholesky. Then the least-squares vertex reconstruction of the
+// paper's Eq. 4 (LSCM-style): for each triangle (e1, e2, e3) with angles (a1, a2, a3),
+//   sin a3 (e3 - e1) = sin a2 R(a1) (e2 - e1),
+// two boundary vertices pinned, solved by sparse Cholesky of the normal equations.
+// Every chart is checked: no flipped or degenerate UV triangle and a boundary that does not
+// cross itself (with both, the map is one-to-one). A chart that fails is split in two (regrown
+// from two far-apart seeds, each half a disk) and flattened again; it is never shipped.
+// Sliver and zero-area triangles get clamped angles (no NaNs). UVs are in metres: each chart
+// is scaled so that its flattened area equals its surface area.
+#pragma once
+
+#include <array>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "carousel/core/mesh.h"
+#include "carousel/core/progress.h"
+
+namespace carousel::texture {
+
+struct ParameterizationOptions {
+  // Newton steps of ABF++ at most, 0..100; 0 = reconstruct from the 3D angles (plain LSCM).
+  int max_abf_iterations = 30;
+  // ABF++ stops when every constraint holds to this, radians, > 0.
+  double abf_tolerance = 1e-7;
+  // A chart that will not flatten validly is split at most this many times over, 0..64.
+  int max_split_depth = 24;
+  // Worker threads; 0 = one per hardware thread.
+  int threads = 0;
+  void Validate() const;
+};
+
+struct ParameterizationResult {
+  std::vector<std::array<Eigen::Vector2d, 3>> uv;  // per face, per corner, metres
+  std::vector<int> chart_of_face;                  // the input's, with split charts renumbered
+  int charts = 0;
+  int charts_split = 0;       // charts that were split to flatten validly
+  int abf_not_converged = 0;  // charts whose ABF++ stopped short of the tolerance
+  double seconds = 0.0;
+};
+
+// \pre chart_of_face: per face, 0 .. charts - 1, each chart a topological disk (ComputeCharts).
+// \throw InvalidArgument (options, sizes), Cancelled.
+ParameterizationResult ParameterizeCharts(const Mesh& mesh, const std::vector<int>& chart_of_face,
+                                          int charts, const ParameterizationOptions& options,
+                                          Progress& progress);
+
+}  // namespace carousel::texture

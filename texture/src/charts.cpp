@@ -1,0 +1,338 @@
+#include "carousel/texture/charts.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <queue>
+#include <random>
+
+#include "carousel/core/error.h"
+#include "carousel/core/timer.h"
+#include "chart_growth.h"
+#include "face_graph.h"
+
+namespace carousel::texture {
+namespace {
+
+using internal::FaceGraph;
+
+struct Entry {
+  double cost;
+  int face;
+  int chart;
+  int from;  // the chart's face next to `face`
+  bool operator>(const Entry& other) const { return cost > other.cost; }
+};
+
+class ChartGrower {
+ public:
+  ChartGrower(const FaceGraph& graph, const ChartOptions& options)
+      : g_(graph),
+        options_(options),
+        min_dot_(std::cos(options.max_normal_deviation_deg * std::numbers::pi / 180.0)) {
+    double total_area = 0.0;
+    for (const double a : g_.areas) total_area += a;
+    scale_ = std::sqrt(std::max(total_area, 1e-30) / options.seeds);
+    // A sliver's own normal is noise: faces are judged by the area-weighted normal of
+    // themselves and their neighbours.
+    normals_.resize(g_.faces.size());
+    for (std::size_t f = 0; f < g_.faces.size(); ++f) {
+      Eigen::Vector3d sum = g_.areas[f] * g_.normals[f];
+      for (const int next : g_.neighbours[f])
+        if (next >= 0) sum += g_.areas[next] * g_.normals[next];
+      const double norm = sum.norm();
+      normals_[f] = norm > 0.0 ? Eigen::Vector3d(sum / norm) : g_.normals[f];
+    }
+  }
+
+  // Grows charts from `seeds` (chart i from seeds[i]) over the whole mesh, or over `region`
+  // only when given (the other faces keep chart -2); faces no chart can take start new
+  // charts, whose seeds are appended to `seeds`. Returns the chart of each face.
+  std::vector<int> Grow(std::vector<int>* seeds, Progress& progress,
+                        const std::vector<int>* region = nullptr) {
+    const int n = g_.face_count();
+    if (region == nullptr) {
+      chart_of_.assign(n, -1);
+    } else {
+      chart_of_.assign(n, -2);
+      for (const int f : *region) chart_of_[f] = -1;
+    }
+    normal_sum_.clear();
+    seed_centroid_.clear();
+    heap_ = decltype(heap_)();
+    for (const int seed : *seeds) StartChart(seed);
+    std::size_t scan = 0;
+    const std::size_t scan_end = region == nullptr ? static_cast<std::size_t>(n) : region->size();
+    auto scanned = [&](std::size_t i) { return region == nullptr ? static_cast<int>(i) : (*region)[i]; };
+    std::size_t popped = 0;
+    while (true) {
+      while (!heap_.empty()) {
+        const Entry e = heap_.top();
+        heap_.pop();
+        if ((++popped & 0xffff) == 0) progress.CheckCancelled();
+        if (chart_of_[e.face] != -1) continue;
+        const double now = Cost(e.face, e.chart, e.from);
+        if (now > e.cost * (1.0 + 1e-9) + 1e-300) {  // the chart's normal moved: re-queue
+          heap_.push({now, e.face, e.chart, e.from});
+          continue;
+        }
+        if (!Accepts(e.face, e.chart)) continue;  // another chart, or a new seed, takes it
+        Assign(e.face, e.chart);
+      }
+      // Faces every chart turned down: one that a neighbouring chart can take as a disk joins
+      // it regardless of its normal (noise, slivers); the rest seed new charts.
+      for (std::size_t i = scan; i < scan_end; ++i) {
+        const int face = scanned(i);
+        if (chart_of_[face] != -1) continue;
+        for (const int next : g_.neighbours[face]) {
+          if (next < 0 || chart_of_[next] < 0) continue;
+          if (Accepts(face, chart_of_[next], /*check_normal=*/false)) {
+            Assign(face, chart_of_[next], /*spread=*/false);
+            break;
+          }
+        }
+      }
+      while (scan < scan_end && chart_of_[scanned(scan)] >= 0) ++scan;
+      if (scan == scan_end) break;
+      seeds->push_back(scanned(scan));
+      StartChart(scanned(scan));
+    }
+    return chart_of_;
+  }
+
+ private:
+  void StartChart(int seed) {
+    const int chart = static_cast<int>(normal_sum_.size());
+    normal_sum_.push_back(Eigen::Vector3d::Zero());
+    seed_centroid_.push_back(g_.centroids[seed]);
+    Assign(seed, chart);
+  }
+
+  void Assign(int face, int chart, bool spread = true) {
+    chart_of_[face] = chart;
+    normal_sum_[chart] += g_.areas[face] * normals_[face];
+    if (!spread) return;
+    for (const int next : g_.neighbours[face])
+      if (next >= 0 && chart_of_[next] == -1) heap_.push({Cost(next, chart, face), next, chart, face});
+  }
+
+  Eigen::Vector3d ChartNormal(int chart) const {
+    const double norm = normal_sum_[chart].norm();
+    return norm > 0.0 ? Eigen::Vector3d(normal_sum_[chart] / norm)
+                      : Eigen::Vector3d(Eigen::Vector3d::Zero());
+  }
+
+  double Cost(int face, int chart, int from) const {
+    const double flatness = 1.0 - ChartNormal(chart).dot(normals_[face]);
+    const double spread = (g_.centroids[face] - seed_centroid_[chart]).norm() / scale_;
+    return (flatness + options_.compactness * spread) *
+           (g_.centroids[face] - g_.centroids[from]).norm();
+  }
+
+  bool InChart(int v, int chart) const {
+    for (int i = g_.fan_start[v]; i < g_.fan_start[v + 1]; ++i)
+      if (chart_of_[g_.fan[i]] == chart) return true;
+    return false;
+  }
+
+  // Whether `face` may join `chart`: normal close enough, and the chart stays a disk.
+  bool Accepts(int face, int chart, bool check_normal = true) const {
+    int shared = 0;
+    int unshared = -1;
+    for (int k = 0; k < 3; ++k) {
+      const int next = g_.neighbours[face][k];
+      if (next >= 0 && chart_of_[next] == chart)
+        ++shared;
+      else
+        unshared = k;
+    }
+    // The normal test applies to faces at the front only: a face the chart already holds on
+    // two sides fills a notch (noise would otherwise leave it a chart of its own).
+    if (check_normal && shared == 1 && ChartNormal(chart).dot(normals_[face]) < min_dot_)
+      return false;
+    const auto& t = g_.faces[face];
+    if (shared == 1) {
+      // One edge shared: the opposite vertex must be new to the chart (else a pinch).
+      for (int k = 0; k < 3; ++k) {
+        const int next = g_.neighbours[face][k];
+        if (next >= 0 && chart_of_[next] == chart) return !InChart(t[(k + 2) % 3], chart);
+      }
+    }
+    if (shared == 2) {
+      // Two edges shared: their common vertex must become interior (its fan complete).
+      const int middle = t[(unshared + 2) % 3];
+      for (int i = g_.fan_start[middle]; i < g_.fan_start[middle + 1]; ++i) {
+        const int other = g_.fan[i];
+        if (other != face && chart_of_[other] != chart) return false;
+      }
+      return true;
+    }
+    return false;  // 0 shared (not adjacent) or 3 (would close the surface)
+  }
+
+  const FaceGraph& g_;
+  const ChartOptions& options_;
+  double min_dot_;
+  double scale_ = 1.0;
+  std::vector<Eigen::Vector3d> normals_;  // per face, smoothed over its neighbours
+  std::vector<int> chart_of_;
+  std::vector<Eigen::Vector3d> normal_sum_;
+  std::vector<Eigen::Vector3d> seed_centroid_;
+  std::priority_queue<Entry, std::vector<Entry>, std::greater<>> heap_;
+};
+
+// Each chart's face farthest from the chart's boundary (peeling rings inward; Cost2 =
+// centroid distance), by a Dijkstra from all boundary faces at once.
+std::vector<int> UpgradeSeeds(const FaceGraph& g, const std::vector<int>& chart_of, int charts) {
+  const int n = g.face_count();
+  std::vector<double> distance(n, std::numeric_limits<double>::infinity());
+  using Item = std::pair<double, int>;
+  std::priority_queue<Item, std::vector<Item>, std::greater<>> queue;
+  for (int f = 0; f < n; ++f) {
+    for (const int next : g.neighbours[f]) {
+      if (next < 0 || chart_of[next] != chart_of[f]) {
+        distance[f] = 0.0;
+        queue.emplace(0.0, f);
+        break;
+      }
+    }
+  }
+  while (!queue.empty()) {
+    const auto [d, f] = queue.top();
+    queue.pop();
+    if (d > distance[f]) continue;
+    for (const int next : g.neighbours[f]) {
+      if (next < 0 || chart_of[next] != chart_of[f]) continue;
+      const double nd = d + (g.centroids[next] - g.centroids[f]).norm();
+      if (nd < distance[next]) {
+        distance[next] = nd;
+        queue.emplace(nd, next);
+      }
+    }
+  }
+  std::vector<int> seeds(charts, -1);
+  for (int f = 0; f < n; ++f) {
+    const int c = chart_of[f];
+    // Ties go to the lowest face index: deterministic.
+    if (seeds[c] < 0 || distance[f] > distance[seeds[c]]) seeds[c] = f;
+  }
+  return seeds;
+}
+
+}  // namespace
+
+namespace internal {
+
+std::vector<int> SplitChart(const FaceGraph& graph, const std::vector<int>& faces,
+                            const ChartOptions& options, Progress& progress) {
+  // Two seeds far apart: the face farthest (by centroid) from the first, then the face
+  // farthest from that one.
+  auto farthest_from = [&](int from) {
+    int best = faces.front();
+    double best_d = -1.0;
+    for (const int f : faces) {
+      const double d = (graph.centroids[f] - graph.centroids[from]).squaredNorm();
+      if (d > best_d) {
+        best_d = d;
+        best = f;
+      }
+    }
+    return best;
+  };
+  const int a = farthest_from(faces.front());
+  const int b = farthest_from(a);
+  std::vector<int> seeds{a, b};
+  if (a == b) seeds.pop_back();
+  ChartOptions split_options = options;
+  split_options.seeds = 2;
+  split_options.max_normal_deviation_deg = 180.0;  // the split only needs disks
+  ChartGrower grower(graph, split_options);
+  const std::vector<int> chart_of = grower.Grow(&seeds, progress, &faces);
+  std::vector<int> local(faces.size());
+  for (std::size_t i = 0; i < faces.size(); ++i) local[i] = chart_of[faces[i]];
+  return local;
+}
+
+}  // namespace internal
+
+void ChartOptions::Validate() const {
+  auto check = [](bool ok, const char* field, const char* rule) {
+    if (!ok) throw InvalidArgument(std::string("ChartOptions.") + field + " must be " + rule);
+  };
+  check(seeds >= 1, "seeds", ">= 1");
+  check(max_normal_deviation_deg > 0.0 && max_normal_deviation_deg <= 180.0,
+        "max_normal_deviation_deg", "in (0, 180]");
+  check(compactness >= 0.0 && std::isfinite(compactness), "compactness", ">= 0");
+  check(max_iterations >= 0, "max_iterations", ">= 0");
+}
+
+ChartsResult ComputeCharts(const Mesh& mesh, const ChartOptions& options, Progress& progress) {
+  options.Validate();
+  CAROUSEL_THROW_IF(mesh.n_faces() == 0, InvalidArgument, "charts: the mesh has no faces");
+  Stopwatch stopwatch;
+  progress.BeginStage("atlas: charts");
+  const FaceGraph graph = internal::BuildFaceGraph(mesh);
+  const int n = graph.face_count();
+
+  // Initial seeds: distinct random faces, preferring faces with an area.
+  std::mt19937_64 random(options.random_seed);
+  std::vector<int> order(n);
+  for (int f = 0; f < n; ++f) order[f] = f;
+  std::shuffle(order.begin(), order.end(), random);
+  std::stable_partition(order.begin(), order.end(), [&](int f) { return graph.areas[f] > 0.0; });
+  std::vector<int> seeds(order.begin(), order.begin() + std::min(n, options.seeds));
+
+  ChartGrower grower(graph, options);
+  ChartsResult result;
+  for (int iteration = 0;; ++iteration) {
+    std::vector<int> grown_from = seeds;
+    result.chart_of_face = grower.Grow(&grown_from, progress);
+    result.charts = static_cast<int>(grown_from.size());
+    result.iterations = iteration + 1;
+    progress.Report(static_cast<double>(iteration + 1) / (options.max_iterations + 1));
+    if (iteration == options.max_iterations) break;
+    std::vector<int> upgraded = UpgradeSeeds(graph, result.chart_of_face, result.charts);
+    if (upgraded == grown_from) {
+      result.converged = true;
+      break;
+    }
+    seeds = std::move(upgraded);
+  }
+  progress.EndStage();
+  result.seconds = stopwatch.ElapsedSeconds();
+  return result;
+}
+
+std::vector<int> CountChartBoundaryLoops(const Mesh& mesh, const std::vector<int>& chart_of_face,
+                                         int charts) {
+  CAROUSEL_THROW_IF(chart_of_face.size() != mesh.n_faces(), InvalidArgument,
+                    "CountChartBoundaryLoops: one chart per face expected");
+  // Boundary halfedges of each chart (the face across is another chart or none), linked
+  // head to tail; loops counted by walking them.
+  std::vector<int> loops(charts, 0);
+  std::vector<char> visited(mesh.n_halfedges(), 0);
+  auto on_boundary = [&](Mesh::HalfedgeHandle h, int chart) {
+    if (mesh.is_boundary(h)) return false;
+    if (chart_of_face[mesh.face_handle(h).idx()] != chart) return false;
+    const auto across = mesh.opposite_face_handle(h);
+    return !across.is_valid() || chart_of_face[across.idx()] != chart;
+  };
+  for (const auto h0 : mesh.halfedges()) {
+    if (visited[h0.idx()] || mesh.is_boundary(h0)) continue;
+    const int chart = chart_of_face[mesh.face_handle(h0).idx()];
+    if (!on_boundary(h0, chart)) continue;
+    ++loops[chart];
+    auto h = h0;
+    while (!visited[h.idx()]) {
+      visited[h.idx()] = 1;
+      // Next boundary halfedge of this chart: rotate around the end vertex.
+      auto next = mesh.next_halfedge_handle(h);
+      while (!on_boundary(next, chart)) next = mesh.next_halfedge_handle(mesh.opposite_halfedge_handle(next));
+      h = next;
+    }
+  }
+  return loops;
+}
+
+}  // namespace carousel::texture

@@ -1,0 +1,507 @@
+#include "carousel/texture/parameterization.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <mutex>
+#include <numbers>
+#include <unordered_map>
+
+#include <Eigen/Geometry>
+#include <Eigen/SparseCholesky>
+#include <Eigen/SparseCore>
+
+#include "carousel/core/error.h"
+#include "carousel/core/logging.h"
+#include "carousel/core/parallel.h"
+#include "carousel/core/timer.h"
+#include "chart_growth.h"
+#include "face_graph.h"
+
+namespace carousel::texture {
+namespace {
+
+using internal::FaceGraph;
+using SparseMatrix = Eigen::SparseMatrix<double>;
+using Triplet = Eigen::Triplet<double>;
+
+constexpr double kPi = std::numbers::pi;
+constexpr double kMinAngle = 0.0175;  // radians (1 degree): slivers are clamped to this
+
+// One chart in local indices.
+struct Chart {
+  std::vector<int> faces;                   // global face ids
+  std::vector<int> vertices;                // global vertex ids
+  std::vector<std::array<int, 3>> corners;  // per face, local vertex ids
+  std::vector<char> interior;               // per local vertex
+};
+
+Chart MakeChart(const FaceGraph& g, const std::vector<int>& faces,
+                const std::vector<int>& chart_of_face) {
+  Chart chart;
+  chart.faces = faces;
+  std::unordered_map<int, int> local;
+  local.reserve(faces.size() * 2);
+  chart.corners.resize(faces.size());
+  for (std::size_t i = 0; i < faces.size(); ++i) {
+    for (int k = 0; k < 3; ++k) {
+      const int v = g.faces[faces[i]][k];
+      const auto [it, added] = local.emplace(v, static_cast<int>(chart.vertices.size()));
+      if (added) chart.vertices.push_back(v);
+      chart.corners[i][k] = it->second;
+    }
+  }
+  const int chart_id = chart_of_face[faces.front()];
+  chart.interior.resize(chart.vertices.size());
+  for (std::size_t i = 0; i < chart.vertices.size(); ++i) {
+    const int v = chart.vertices[i];
+    bool interior = !g.boundary_vertex[v];
+    for (int j = g.fan_start[v]; interior && j < g.fan_start[v + 1]; ++j)
+      interior = chart_of_face[g.fan[j]] == chart_id;
+    chart.interior[i] = interior ? 1 : 0;
+  }
+  return chart;
+}
+
+// The 3D corner angles of a face, clamped away from 0 and pi, summing to pi.
+std::array<double, 3> CornerAngles(const FaceGraph& g, int face) {
+  std::array<double, 3> angle{};
+  const auto& t = g.faces[face];
+  bool degenerate = false;
+  for (int k = 0; k < 3; ++k) {
+    const Eigen::Vector3d u = g.positions[t[(k + 1) % 3]] - g.positions[t[k]];
+    const Eigen::Vector3d w = g.positions[t[(k + 2) % 3]] - g.positions[t[k]];
+    const double cross = u.cross(w).norm();
+    const double dot = u.dot(w);
+    if (!(cross > 0.0 || dot != 0.0) || !std::isfinite(cross) || !std::isfinite(dot))
+      degenerate = true;
+    angle[k] = std::atan2(cross, dot);
+  }
+  if (degenerate) return {kPi / 3, kPi / 3, kPi / 3};
+  for (int pass = 0; pass < 2; ++pass) {
+    double sum = 0.0;
+    for (double& a : angle) {
+      a = std::clamp(a, kMinAngle, kPi - 2 * kMinAngle);
+      sum += a;
+    }
+    for (double& a : angle) a *= kPi / sum;
+  }
+  return angle;
+}
+
+// ABF++: the 2D angles per corner (3 per face, in face order). Returns false when the
+// constraints did not reach the tolerance (the angles are still usable).
+bool SolveAbf(const FaceGraph& g, const Chart& chart, const ParameterizationOptions& options,
+              std::vector<double>* alpha) {
+  const int nf = static_cast<int>(chart.faces.size());
+  const int n = 3 * nf;
+  std::vector<double> beta(n);
+  for (int i = 0; i < nf; ++i) {
+    const auto a = CornerAngles(g, chart.faces[i]);
+    for (int k = 0; k < 3; ++k) beta[3 * i + k] = a[k];
+  }
+  // Interior vertices: their own row pair; the 3D angles around them scaled to 2 pi.
+  std::vector<int> row_of(chart.vertices.size(), -1);
+  int interior = 0;
+  for (std::size_t v = 0; v < chart.vertices.size(); ++v)
+    if (chart.interior[v]) row_of[v] = interior++;
+  std::vector<double> angle_sum(interior, 0.0);
+  for (int i = 0; i < nf; ++i)
+    for (int k = 0; k < 3; ++k)
+      if (row_of[chart.corners[i][k]] >= 0) angle_sum[row_of[chart.corners[i][k]]] += beta[3 * i + k];
+  for (int i = 0; i < nf; ++i)
+    for (int k = 0; k < 3; ++k)
+      if (row_of[chart.corners[i][k]] >= 0)
+        beta[3 * i + k] *= 2 * kPi / angle_sum[row_of[chart.corners[i][k]]];
+  // Boundary vertices: ABF leaves their angle sums free, and one whose surface angles sum to
+  // more than 2 pi (a saddle on a bumpy surface) would fold the boundary over itself. Their
+  // targets are scaled down to at most kMaxBoundaryAngle.
+  {
+    constexpr double kMaxBoundaryAngle = 1.8 * kPi;
+    std::vector<double> boundary_sum(chart.vertices.size(), 0.0);
+    for (int i = 0; i < nf; ++i)
+      for (int k = 0; k < 3; ++k)
+        if (row_of[chart.corners[i][k]] < 0) boundary_sum[chart.corners[i][k]] += beta[3 * i + k];
+    for (int i = 0; i < nf; ++i)
+      for (int k = 0; k < 3; ++k) {
+        const double sum = boundary_sum[chart.corners[i][k]];
+        if (row_of[chart.corners[i][k]] < 0 && sum > kMaxBoundaryAngle)
+          beta[3 * i + k] *= kMaxBoundaryAngle / sum;
+      }
+  }
+  *alpha = beta;
+  if (options.max_abf_iterations == 0) return true;
+  // D = (2 W)^-1 with W = diag(1 / beta^2).
+  Eigen::VectorXd d(n);
+  for (int i = 0; i < n; ++i) d[i] = 0.5 * beta[i] * beta[i];
+  Eigen::VectorXd d1(nf);  // J1 D J1^T, diagonal
+  for (int i = 0; i < nf; ++i) d1[i] = d[3 * i] + d[3 * i + 1] + d[3 * i + 2];
+
+  for (int iteration = 0; iteration < options.max_abf_iterations; ++iteration) {
+    std::vector<double>& a = *alpha;
+    // Constraint values.
+    Eigen::VectorXd c1(nf);
+    for (int i = 0; i < nf; ++i) c1[i] = a[3 * i] + a[3 * i + 1] + a[3 * i + 2] - kPi;
+    Eigen::VectorXd c2 = Eigen::VectorXd::Zero(2 * interior);
+    std::vector<Triplet> j2;
+    j2.reserve(static_cast<std::size_t>(9) * nf);
+    for (int i = 0; i < nf; ++i) {
+      for (int k = 0; k < 3; ++k) {
+        const int row = row_of[chart.corners[i][k]];
+        if (row < 0) continue;
+        const int here = 3 * i + k;
+        const int next = 3 * i + (k + 1) % 3;
+        const int prev = 3 * i + (k + 2) % 3;
+        c2[row] += a[here];
+        j2.emplace_back(row, here, 1.0);
+        c2[interior + row] += std::log(std::sin(a[next])) - std::log(std::sin(a[prev]));
+        j2.emplace_back(interior + row, next, 1.0 / std::tan(a[next]));
+        j2.emplace_back(interior + row, prev, -1.0 / std::tan(a[prev]));
+      }
+    }
+    for (int row = 0; row < interior; ++row) c2[row] -= 2 * kPi;
+    const double worst = std::max(c1.cwiseAbs().maxCoeff(),
+                                  interior > 0 ? c2.cwiseAbs().maxCoeff() : 0.0);
+    if (!std::isfinite(worst)) return false;
+    if (worst < options.abf_tolerance) return true;
+
+    // r = C - J (alpha - beta).
+    Eigen::VectorXd offset(n);
+    for (int i = 0; i < n; ++i) offset[i] = a[i] - beta[i];
+    Eigen::VectorXd r1(nf);
+    for (int i = 0; i < nf; ++i) r1[i] = c1[i] - (offset[3 * i] + offset[3 * i + 1] + offset[3 * i + 2]);
+    Eigen::VectorXd lambda1(nf);
+    Eigen::VectorXd step(n);
+    if (interior == 0) {
+      lambda1 = r1.cwiseQuotient(d1);
+      for (int i = 0; i < nf; ++i)
+        for (int k = 0; k < 3; ++k)
+          step[3 * i + k] = -offset[3 * i + k] - d[3 * i + k] * lambda1[i];
+    } else {
+      SparseMatrix jj2(2 * interior, n);
+      jj2.setFromTriplets(j2.begin(), j2.end());
+      const Eigen::VectorXd r2 = c2 - jj2 * offset;
+      // B = J2 D J1^T: row of J2 times D, summed per face.
+      const SparseMatrix j2d = jj2 * d.asDiagonal();
+      std::vector<Triplet> b_entries;
+      b_entries.reserve(j2d.nonZeros());
+      for (int col = 0; col < j2d.outerSize(); ++col)
+        for (SparseMatrix::InnerIterator it(j2d, col); it; ++it)
+          b_entries.emplace_back(it.row(), col / 3, it.value());
+      SparseMatrix b(2 * interior, nf);
+      b.setFromTriplets(b_entries.begin(), b_entries.end());
+      const Eigen::VectorXd inv_d1 = d1.cwiseInverse();
+      // Schur complement S = J2 D J2^T - B D1^-1 B^T, symmetric positive definite.
+      const SparseMatrix s = SparseMatrix(j2d * jj2.transpose()) -
+                             SparseMatrix(b * inv_d1.asDiagonal() * b.transpose());
+      Eigen::SimplicialLDLT<SparseMatrix> solver(s);
+      if (solver.info() != Eigen::Success) return false;
+      const Eigen::VectorXd lambda2 = solver.solve(r2 - b * inv_d1.cwiseProduct(r1));
+      if (solver.info() != Eigen::Success || !lambda2.allFinite()) return false;
+      lambda1 = inv_d1.cwiseProduct(r1 - b.transpose() * lambda2);
+      const Eigen::VectorXd j2t = jj2.transpose() * lambda2;
+      for (int i = 0; i < nf; ++i)
+        for (int k = 0; k < 3; ++k) {
+          const int c = 3 * i + k;
+          step[c] = -offset[c] - d[c] * (lambda1[i] + j2t[c]);
+        }
+    }
+    if (!step.allFinite()) return false;
+    // Only kept inside (0, pi), where log sin is defined; the energy keeps them near beta.
+    for (int i = 0; i < n; ++i) a[i] = std::clamp(a[i] + step[i], 1e-6, kPi - 1e-6);
+  }
+  return false;
+}
+
+// Least-squares vertex positions from the angles (paper Eq. 4), two boundary vertices pinned.
+// Returns positions per local vertex, or an empty vector when the solve fails.
+std::vector<Eigen::Vector2d> Reconstruct(const FaceGraph& g, const Chart& chart,
+                                         const std::vector<double>& alpha) {
+  const int nv = static_cast<int>(chart.vertices.size());
+  const int nf = static_cast<int>(chart.faces.size());
+  std::vector<Eigen::Vector2d> uv(nv, Eigen::Vector2d::Zero());
+  // Pins: two boundary vertices far apart (the farthest from a boundary vertex, then the
+  // farthest from that one), at their 3D distance.
+  int first = 0;
+  for (int v = 0; v < nv; ++v)
+    if (!chart.interior[v]) {
+      first = v;
+      break;
+    }
+  auto farthest = [&](int from) {
+    int best = from;
+    double best_d = -1.0;
+    for (int v = 0; v < nv; ++v) {
+      if (chart.interior[v]) continue;
+      const double dist = (g.positions[chart.vertices[v]] - g.positions[chart.vertices[from]]).norm();
+      if (dist > best_d) {
+        best_d = dist;
+        best = v;
+      }
+    }
+    return best;
+  };
+  const int pin0 = farthest(first);
+  const int pin1 = farthest(pin0);
+  if (pin0 == pin1) return {};
+  const double span = (g.positions[chart.vertices[pin1]] - g.positions[chart.vertices[pin0]]).norm();
+  uv[pin0] = Eigen::Vector2d(0.0, 0.0);
+  uv[pin1] = Eigen::Vector2d(span > 0.0 ? span : 1.0, 0.0);
+  // Unknown index of each vertex's u (v follows), -1 for pins.
+  std::vector<int> column(nv, -1);
+  int unknowns = 0;
+  for (int v = 0; v < nv; ++v)
+    if (v != pin0 && v != pin1) column[v] = 2 * unknowns++;
+  if (unknowns == 0) return uv;
+  std::vector<Triplet> entries;
+  entries.reserve(static_cast<std::size_t>(12) * nf);
+  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(2 * nf);
+  for (int i = 0; i < nf; ++i) {
+    const auto& t = chart.corners[i];
+    const double s1 = std::sin(alpha[3 * i]);
+    const double c1 = std::cos(alpha[3 * i]);
+    const double s2 = std::sin(alpha[3 * i + 1]);
+    const double s3 = std::sin(alpha[3 * i + 2]);
+    const double scale = 1.0 / std::max({s2, s3, 1e-12});
+    // Row x: x1 (-s3 + s2 c1) + x2 (-s2 c1) + x3 s3 + y1 (-s2 s1) + y2 (s2 s1) = 0
+    // Row y: x1 (s2 s1) + x2 (-s2 s1) + y1 (-s3 + s2 c1) + y2 (-s2 c1) + y3 s3 = 0
+    const std::array<std::array<double, 6>, 2> coeff = {{
+        {-s3 + s2 * c1, -s2 * c1, s3, -s2 * s1, s2 * s1, 0.0},
+        {s2 * s1, -s2 * s1, 0.0, -s3 + s2 * c1, -s2 * c1, s3},
+    }};
+    for (int row = 0; row < 2; ++row) {
+      for (int k = 0; k < 6; ++k) {
+        const double value = coeff[row][k] * scale;
+        if (value == 0.0) continue;
+        const int v = t[k % 3];
+        const int axis = k / 3;
+        if (column[v] < 0)
+          rhs[2 * i + row] -= value * uv[v][axis];
+        else
+          entries.emplace_back(2 * i + row, column[v] + axis, value);
+      }
+    }
+  }
+  SparseMatrix a(2 * nf, 2 * unknowns);
+  a.setFromTriplets(entries.begin(), entries.end());
+  const SparseMatrix normal = SparseMatrix(a.transpose() * a);
+  Eigen::SimplicialLDLT<SparseMatrix> solver(normal);
+  if (solver.info() != Eigen::Success) return {};
+  const Eigen::VectorXd x = solver.solve(a.transpose() * rhs);
+  if (solver.info() != Eigen::Success || !x.allFinite()) return {};
+  for (int v = 0; v < nv; ++v)
+    if (column[v] >= 0) uv[v] = Eigen::Vector2d(x[column[v]], x[column[v] + 1]);
+  return uv;
+}
+
+double Cross(const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+  return a.x() * b.y() - a.y() * b.x();
+}
+
+// Whether segments (p1, p2) and (q1, q2) cross or touch (shared endpoints excluded by the
+// caller).
+bool SegmentsIntersect(const Eigen::Vector2d& p1, const Eigen::Vector2d& p2,
+                       const Eigen::Vector2d& q1, const Eigen::Vector2d& q2) {
+  const double d1 = Cross(q2 - q1, p1 - q1);
+  const double d2 = Cross(q2 - q1, p2 - q1);
+  const double d3 = Cross(p2 - p1, q1 - p1);
+  const double d4 = Cross(p2 - p1, q2 - p1);
+  if (((d1 > 0 && d2 < 0) || (d1 < 0 && d2 > 0)) && ((d3 > 0 && d4 < 0) || (d3 < 0 && d4 > 0)))
+    return true;
+  auto on_segment = [](const Eigen::Vector2d& a, const Eigen::Vector2d& b,
+                       const Eigen::Vector2d& p) {
+    return p.x() >= std::min(a.x(), b.x()) && p.x() <= std::max(a.x(), b.x()) &&
+           p.y() >= std::min(a.y(), b.y()) && p.y() <= std::max(a.y(), b.y());
+  };
+  return (d1 == 0 && on_segment(q1, q2, p1)) || (d2 == 0 && on_segment(q1, q2, p2)) ||
+         (d3 == 0 && on_segment(p1, p2, q1)) || (d4 == 0 && on_segment(p1, p2, q2));
+}
+
+// A flattening is valid when no triangle is flipped or degenerate and the boundary does not
+// cross itself.
+bool IsValid(const FaceGraph& g, const Chart& chart, const std::vector<int>& chart_of_face,
+             const std::vector<Eigen::Vector2d>& uv) {
+  double total = 0.0;
+  for (const auto& t : chart.corners) total += Cross(uv[t[1]] - uv[t[0]], uv[t[2]] - uv[t[0]]);
+  if (!(total > 0.0)) return false;
+  const double min_area = 1e-12 * total / static_cast<double>(chart.corners.size());
+  int flipped = 0;
+  for (const auto& t : chart.corners)
+    if (!(Cross(uv[t[1]] - uv[t[0]], uv[t[2]] - uv[t[0]]) > min_area)) ++flipped;
+  if (flipped > 0) return false;
+  // Boundary edges (local vertex pairs), bucketed in a grid over the chart's box.
+  std::vector<std::pair<int, int>> edges;
+  const int chart_id = chart_of_face[chart.faces.front()];
+  for (std::size_t i = 0; i < chart.faces.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      const int across = g.neighbours[chart.faces[i]][k];
+      if (across < 0 || chart_of_face[across] != chart_id)
+        edges.emplace_back(chart.corners[i][k], chart.corners[i][(k + 1) % 3]);
+    }
+  Eigen::AlignedBox2d box;
+  for (const auto& p : uv) box.extend(p);
+  const int cells = std::max(1, static_cast<int>(std::sqrt(static_cast<double>(edges.size()))));
+  const Eigen::Vector2d size = box.sizes().cwiseMax(1e-30);
+  auto cell_of = [&](const Eigen::Vector2d& p) {
+    const Eigen::Vector2d r = (p - box.min()).cwiseQuotient(size) * cells;
+    return Eigen::Vector2i(std::clamp(static_cast<int>(r.x()), 0, cells - 1),
+                           std::clamp(static_cast<int>(r.y()), 0, cells - 1));
+  };
+  std::vector<std::vector<int>> grid(static_cast<std::size_t>(cells) * cells);
+  for (std::size_t e = 0; e < edges.size(); ++e) {
+    const Eigen::Vector2i a = cell_of(uv[edges[e].first]);
+    const Eigen::Vector2i b = cell_of(uv[edges[e].second]);
+    for (int y = std::min(a.y(), b.y()); y <= std::max(a.y(), b.y()); ++y)
+      for (int x = std::min(a.x(), b.x()); x <= std::max(a.x(), b.x()); ++x)
+        grid[static_cast<std::size_t>(y) * cells + x].push_back(static_cast<int>(e));
+  }
+  for (const auto& bucket : grid)
+    for (std::size_t i = 0; i < bucket.size(); ++i)
+      for (std::size_t j = i + 1; j < bucket.size(); ++j) {
+        const auto& e = edges[bucket[i]];
+        const auto& f = edges[bucket[j]];
+        if (e.first == f.first || e.first == f.second || e.second == f.first ||
+            e.second == f.second)
+          continue;
+        if (SegmentsIntersect(uv[e.first], uv[e.second], uv[f.first], uv[f.second])) return false;
+      }
+  return true;
+}
+
+struct Flattened {
+  bool valid = false;
+  bool abf_converged = true;
+  std::vector<Eigen::Vector2d> uv;  // per local vertex
+};
+
+Flattened Flatten(const FaceGraph& g, const Chart& chart, const std::vector<int>& chart_of_face,
+                  const ParameterizationOptions& options) {
+  Flattened out;
+  std::vector<double> alpha;
+  out.abf_converged = SolveAbf(g, chart, options, &alpha);
+  bool finite = true;
+  for (const double a : alpha) finite = finite && std::isfinite(a);
+  if (!finite) {  // fall back to the 3D angles
+    ParameterizationOptions plain = options;
+    plain.max_abf_iterations = 0;
+    SolveAbf(g, chart, plain, &alpha);
+  }
+  out.uv = Reconstruct(g, chart, alpha);
+  if (out.uv.empty()) return out;
+  // Scale to the surface area.
+  double area_2d = 0.0;
+  double area_3d = 0.0;
+  for (std::size_t i = 0; i < chart.faces.size(); ++i) {
+    const auto& t = chart.corners[i];
+    area_2d += 0.5 * Cross(out.uv[t[1]] - out.uv[t[0]], out.uv[t[2]] - out.uv[t[0]]);
+    area_3d += g.areas[chart.faces[i]];
+  }
+  if (area_2d > 0.0 && area_3d > 0.0) {
+    const double s = std::sqrt(area_3d / area_2d);
+    for (auto& p : out.uv) p *= s;
+  }
+  out.valid = IsValid(g, chart, chart_of_face, out.uv);
+  return out;
+}
+
+}  // namespace
+
+void ParameterizationOptions::Validate() const {
+  auto check = [](bool ok, const char* field, const char* rule) {
+    if (!ok)
+      throw InvalidArgument(std::string("ParameterizationOptions.") + field + " must be " + rule);
+  };
+  check(max_abf_iterations >= 0 && max_abf_iterations <= 100, "max_abf_iterations",
+        "in [0, 100]");
+  check(abf_tolerance > 0.0 && std::isfinite(abf_tolerance), "abf_tolerance", "> 0");
+  check(max_split_depth >= 0 && max_split_depth <= 64, "max_split_depth", "in [0, 64]");
+  check(threads >= 0, "threads", ">= 0");
+}
+
+ParameterizationResult ParameterizeCharts(const Mesh& mesh, const std::vector<int>& chart_of_face,
+                                          int charts, const ParameterizationOptions& options,
+                                          Progress& progress) {
+  options.Validate();
+  CAROUSEL_THROW_IF(chart_of_face.size() != mesh.n_faces(), InvalidArgument,
+                    "parameterization: " << chart_of_face.size() << " chart ids for "
+                                         << mesh.n_faces() << " faces");
+  for (const int c : chart_of_face)
+    CAROUSEL_THROW_IF(c < 0 || c >= charts, InvalidArgument,
+                      "parameterization: chart id " << c << " outside 0.." << charts - 1);
+  Stopwatch stopwatch;
+  progress.BeginStage("atlas: flattening");
+  const FaceGraph graph = internal::BuildFaceGraph(mesh);
+  ParameterizationResult result;
+  result.chart_of_face = chart_of_face;
+  result.uv.resize(mesh.n_faces());
+
+  std::vector<std::vector<int>> pending(charts);
+  for (int f = 0; f < graph.face_count(); ++f) pending[chart_of_face[f]].push_back(f);
+  std::erase_if(pending, [](const std::vector<int>& faces) { return faces.empty(); });
+  std::vector<int> depth(pending.size(), 0);
+  int next_id = 0;
+  std::vector<int> final_chart(mesh.n_faces(), -1);
+  std::size_t total_faces = mesh.n_faces();
+  std::size_t faces_done = 0;
+  // Rounds: flatten every pending chart (in parallel); split the invalid ones for the next.
+  while (!pending.empty()) {
+    // Chart ids for this round: unique per pending chart, in result.chart_of_face (faces of
+    // charts already done hold -1).
+    for (std::size_t c = 0; c < pending.size(); ++c)
+      for (const int f : pending[c]) result.chart_of_face[f] = static_cast<int>(c);
+    std::vector<Flattened> flat(pending.size());
+    std::vector<Chart> local(pending.size());
+    std::atomic<int> not_converged{0};
+    ParallelFor(pending.size(), 1, options.threads, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t c = begin; c < end; ++c) {
+        progress.CheckCancelled();
+        local[c] = MakeChart(graph, pending[c], result.chart_of_face);
+        flat[c] = Flatten(graph, local[c], result.chart_of_face, options);
+        if (!flat[c].abf_converged) ++not_converged;
+      }
+    });
+    result.abf_not_converged += not_converged;
+    std::vector<std::vector<int>> next;
+    std::vector<int> next_depth;
+    for (std::size_t c = 0; c < pending.size(); ++c) {
+      const bool single = pending[c].size() == 1;
+      if (flat[c].valid || (single && !flat[c].uv.empty())) {
+        for (std::size_t i = 0; i < pending[c].size(); ++i) {
+          const int f = pending[c][i];
+          for (int k = 0; k < 3; ++k) result.uv[f][k] = flat[c].uv[local[c].corners[i][k]];
+          final_chart[f] = next_id;
+          result.chart_of_face[f] = -1;  // done: never mistaken for a later round's chart
+        }
+        ++next_id;
+        faces_done += pending[c].size();
+        continue;
+      }
+      ++result.charts_split;
+      std::vector<int> parts;
+      if (depth[c] < options.max_split_depth && !single) {
+        parts = internal::SplitChart(graph, pending[c], ChartOptions(), progress);
+      } else {
+        parts.resize(pending[c].size());  // last resort: one chart per face
+        for (std::size_t i = 0; i < parts.size(); ++i) parts[i] = static_cast<int>(i);
+      }
+      const int n_parts = parts.empty() ? 0 : *std::max_element(parts.begin(), parts.end()) + 1;
+      const std::size_t first = next.size();
+      next.resize(first + n_parts);
+      next_depth.resize(first + n_parts, depth[c] + 1);
+      for (std::size_t i = 0; i < parts.size(); ++i) next[first + parts[i]].push_back(pending[c][i]);
+    }
+    pending = std::move(next);
+    depth = std::move(next_depth);
+    progress.Report(faces_done, total_faces);
+  }
+  result.chart_of_face = std::move(final_chart);
+  result.charts = next_id;
+  if (result.charts_split > 0)
+    CAROUSEL_LOG_INFO("atlas: " << result.charts_split
+                                << " chart(s) did not flatten one-to-one and were split");
+  progress.EndStage();
+  result.seconds = stopwatch.ElapsedSeconds();
+  return result;
+}
+
+}  // namespace carousel::texture
