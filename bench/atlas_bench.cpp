@@ -4,13 +4,15 @@
 // cores; <= 300 charts, L2 stretch <= 1.05 and utilization >= 75 % on the 50k mesh).
 //
 //   atlas_bench [--faces 5000,50000,200000] [--mesh FILE] [--noise N] [--size N] [--seeds N]
-//               [--gutter N]
+//               [--gutter N] [--max-normal-deviation DEG] [--charts-image PNG]
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
 #include <string>
 #include <vector>
 
+#include "carousel/core/image_io.h"
 #include "carousel/core/mesh_io.h"
 #include "carousel/core/mesh_primitives.h"
 #include "carousel/core/progress.h"
@@ -21,8 +23,11 @@ namespace {
 
 using namespace carousel;  // NOLINT(google-build-using-namespace)
 
+std::string g_charts_image;  // --charts-image: the OBB atlas of the last mesh
+
 void Report(const std::string& name, const Mesh& input, const texture::AtlasOptions& options) {
-  for (const texture::PackingMode mode : {texture::PackingMode::kObb, texture::PackingMode::kAabb}) {
+  for (const texture::PackingMode mode :
+       {texture::PackingMode::kObb, texture::PackingMode::kAabb}) {
     Mesh mesh = input;
     texture::AtlasOptions o = options;
     o.packing.mode = mode;
@@ -37,10 +42,12 @@ void Report(const std::string& name, const Mesh& input, const texture::AtlasOpti
         "%.1f %%; %.0f texels/m in %d^2; valid %d (flipped %zu, overlaps %zu, gutter %zu, "
         "non-disks %d)\n",
         name.c_str(), mesh.n_faces(), texture::PackingModeName(mode), seconds, r.seconds_charts,
-        r.seconds_parameterization, r.seconds_packing, q.charts, r.seeds_grown_into,
-        r.charts_split, q.l2_stretch, q.max_face_stretch, q.angle_distortion_deg,
-        100.0 * q.utilization, q.texels_per_metre, o.packing.size, q.Valid(), q.flipped_faces,
-        q.overlapping_texels, q.gutter_violations, q.charts_not_disks);
+        r.seconds_parameterization, r.seconds_packing, q.charts, r.seeds_grown_into, r.charts_split,
+        q.l2_stretch, q.max_face_stretch, q.angle_distortion_deg, 100.0 * q.utilization,
+        q.texels_per_metre, o.packing.size, q.Valid(), q.flipped_faces, q.overlapping_texels,
+        q.gutter_violations, q.charts_not_disks);
+    if (!g_charts_image.empty() && mode == texture::PackingMode::kObb)
+      WriteImage(g_charts_image, texture::DrawCharts(mesh, std::min(o.packing.size, 2048)));
   }
 }
 
@@ -72,6 +79,10 @@ int main(int argc, char** argv) {
       options.packing.size = std::stoi(next());
     } else if (arg == "--seeds") {
       options.charts.seeds = std::stoi(next());
+    } else if (arg == "--max-normal-deviation") {
+      options.charts.max_normal_deviation_deg = std::stod(next());
+    } else if (arg == "--charts-image") {
+      g_charts_image = next();
     } else if (arg == "--gutter") {
       options.packing.gutter_texels = std::stoi(next());
     } else {

@@ -113,8 +113,10 @@ AtlasQuality MeasureAtlas(const Mesh& mesh, int atlas_size, int gutter_texels) {
     // Sander et al.: the partial derivatives of the surface position along s and t.
     const double s1 = t[0].x(), s2 = t[1].x(), s3 = t[2].x();
     const double t1 = t[0].y(), t2 = t[1].y(), t3 = t[2].y();
-    const Eigen::Vector3d ss = (p[0] * (t2 - t3) + p[1] * (t3 - t1) + p[2] * (t1 - t2)) / (2 * a_uv);
-    const Eigen::Vector3d st = (p[0] * (s3 - s2) + p[1] * (s1 - s3) + p[2] * (s2 - s1)) / (2 * a_uv);
+    const Eigen::Vector3d ss =
+        (p[0] * (t2 - t3) + p[1] * (t3 - t1) + p[2] * (t1 - t2)) / (2 * a_uv);
+    const Eigen::Vector3d st =
+        (p[0] * (s3 - s2) + p[1] * (s1 - s3) + p[2] * (s2 - s1)) / (2 * a_uv);
     const double l2_sq = 0.5 * (ss.squaredNorm() + st.squaredNorm());
     face_stretch_sq[f.idx()] = l2_sq;
     stretch_sq += l2_sq * a_3d;
@@ -159,7 +161,8 @@ AtlasQuality MeasureAtlas(const Mesh& mesh, int atlas_size, int gutter_texels) {
   const int grow = std::max(0, (gutter_texels - 1) / 2);
   if (grow > 0) {
     cv::Mat claimed(atlas_size, atlas_size, CV_32SC1, cv::Scalar(-1));
-    const cv::Mat kernel = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * grow + 1, 2 * grow + 1));
+    const cv::Mat kernel =
+        cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * grow + 1, 2 * grow + 1));
     for (int chart = 0; chart < charts; ++chart) {
       if (bounds[chart].area() == 0) continue;
       const cv::Rect roi = (bounds[chart] + cv::Size(2 * grow, 2 * grow) - cv::Point(grow, grow)) &
@@ -217,9 +220,9 @@ const PackingResult& AtlasBuilder::Pack(const PackingOptions& options, Progress&
 
 void AtlasBuilder::Apply(Mesh* mesh) const {
   CAROUSEL_THROW_IF(!packed_, InvalidArgument, "atlas: pack the charts before applying them");
-  CAROUSEL_THROW_IF(mesh->n_faces() != mesh_.n_faces(), InvalidArgument,
-                    "atlas: the mesh has " << mesh->n_faces() << " faces, the atlas "
-                                           << mesh_.n_faces());
+  CAROUSEL_THROW_IF(
+      mesh->n_faces() != mesh_.n_faces(), InvalidArgument,
+      "atlas: the mesh has " << mesh->n_faces() << " faces, the atlas " << mesh_.n_faces());
   for (const auto f : mesh->faces()) {
     mesh->set_chart_id(f, flat_->chart_of_face[f.idx()]);
     // Corner k of the atlas stages is the start of the face's k-th halfedge (from its first

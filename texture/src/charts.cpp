@@ -17,6 +17,112 @@ namespace {
 
 using internal::FaceGraph;
 
+constexpr int kSmoothingPasses = 8;  // boundary straightening passes at most
+
+// Edges `face` shares with faces of `chart`.
+int SharedEdges(const FaceGraph& g, const std::vector<int>& chart_of, int face, int chart) {
+  int shared = 0;
+  for (const int next : g.neighbours[face]) shared += next >= 0 && chart_of[next] == chart ? 1 : 0;
+  return shared;
+}
+
+bool TouchesChart(const FaceGraph& g, const std::vector<int>& chart_of, int v, int chart,
+                  int except) {
+  for (int i = g.fan_start[v]; i < g.fan_start[v + 1]; ++i)
+    if (g.fan[i] != except && chart_of[g.fan[i]] == chart) return true;
+  return false;
+}
+
+// Whether `chart` (a disk) stays a disk when `face`, next to it, joins it: one boundary loop,
+// no pinched vertex. O(valence).
+bool KeepsDiskWhenJoining(const FaceGraph& g, const std::vector<int>& chart_of, int face,
+                          int chart) {
+  int shared = 0;
+  int unshared = -1;
+  int one = -1;
+  for (int k = 0; k < 3; ++k) {
+    const int next = g.neighbours[face][k];
+    if (next >= 0 && chart_of[next] == chart) {
+      ++shared;
+      one = k;
+    } else {
+      unshared = k;
+    }
+  }
+  const auto& t = g.faces[face];
+  // One edge shared: the opposite vertex must be new to the chart (else a pinch).
+  if (shared == 1) return !TouchesChart(g, chart_of, t[(one + 2) % 3], chart, face);
+  if (shared == 2) {
+    // Two edges shared: their common vertex must become interior (its fan complete).
+    const int middle = t[(unshared + 2) % 3];
+    for (int i = g.fan_start[middle]; i < g.fan_start[middle + 1]; ++i)
+      if (g.fan[i] != face && chart_of[g.fan[i]] != chart) return false;
+    return true;
+  }
+  return false;  // 0 shared (not adjacent) or 3 (would close the surface)
+}
+
+// Whether `chart` (a disk holding `face`) stays a disk without it.
+bool KeepsDiskWhenLeaving(const FaceGraph& g, const std::vector<int>& chart_of, int face,
+                          int chart) {
+  int shared = 0;
+  int unshared = -1;
+  int one = -1;
+  for (int k = 0; k < 3; ++k) {
+    const int next = g.neighbours[face][k];
+    if (next >= 0 && chart_of[next] == chart) {
+      ++shared;
+      one = k;
+    } else {
+      unshared = k;
+    }
+  }
+  const auto& t = g.faces[face];
+  // A leaf: its free vertex must belong to no other face of the chart.
+  if (shared == 1) return !TouchesChart(g, chart_of, t[(one + 2) % 3], chart, face);
+  if (shared == 2) {
+    // A notch appears at the common vertex of the shared edges: it must be interior now.
+    const int middle = t[(unshared + 2) % 3];
+    if (g.boundary_vertex[middle]) return false;
+    for (int i = g.fan_start[middle]; i < g.fan_start[middle + 1]; ++i)
+      if (chart_of[g.fan[i]] != chart) return false;
+    return true;
+  }
+  return false;  // the chart's only face, or an interior face (a hole)
+}
+
+// Straightens chart boundaries: a face that shares more edges with a neighbouring chart than
+// with its own moves there when both stay disks. Removes the fingers and notches noisy
+// normals leave; shorter boundaries flatten better and pack tighter. Faces with chart < 0
+// are left alone.
+void SmoothChartBoundaries(const FaceGraph& g, std::vector<int>* chart_of, int passes) {
+  std::vector<int>& of = *chart_of;
+  for (int pass = 0; pass < passes; ++pass) {
+    int moved = 0;
+    for (int f = 0; f < g.face_count(); ++f) {
+      const int own = of[f];
+      if (own < 0) continue;
+      const int own_shared = SharedEdges(g, of, f, own);
+      int target = -1;
+      int target_shared = own_shared;
+      for (const int next : g.neighbours[f]) {
+        if (next < 0 || of[next] < 0 || of[next] == own) continue;
+        const int shared = SharedEdges(g, of, f, of[next]);
+        if (shared > target_shared) {
+          target = of[next];
+          target_shared = shared;
+        }
+      }
+      if (target < 0 || !KeepsDiskWhenLeaving(g, of, f, own) ||
+          !KeepsDiskWhenJoining(g, of, f, target))
+        continue;
+      of[f] = target;
+      ++moved;
+    }
+    if (moved == 0) break;
+  }
+}
+
 struct Entry {
   double cost;
   int face;
@@ -33,7 +139,8 @@ class ChartGrower {
         min_dot_(std::cos(options.max_normal_deviation_deg * std::numbers::pi / 180.0)) {
     double total_area = 0.0;
     for (const double a : g_.areas) total_area += a;
-    scale_ = std::sqrt(std::max(total_area, 1e-30) / options.seeds);
+    scale_ = std::sqrt(std::max(total_area, 1e-30) /
+                       std::max(options.seeds, g_.face_count() / options.faces_per_seed));
     // A sliver's own normal is noise: faces are judged by the area-weighted normal of
     // themselves and their neighbours.
     normals_.resize(g_.faces.size());
@@ -64,7 +171,9 @@ class ChartGrower {
     for (const int seed : *seeds) StartChart(seed);
     std::size_t scan = 0;
     const std::size_t scan_end = region == nullptr ? static_cast<std::size_t>(n) : region->size();
-    auto scanned = [&](std::size_t i) { return region == nullptr ? static_cast<int>(i) : (*region)[i]; };
+    auto scanned = [&](std::size_t i) {
+      return region == nullptr ? static_cast<int>(i) : (*region)[i];
+    };
     std::size_t popped = 0;
     while (true) {
       while (!heap_.empty()) {
@@ -114,7 +223,8 @@ class ChartGrower {
     normal_sum_[chart] += g_.areas[face] * normals_[face];
     if (!spread) return;
     for (const int next : g_.neighbours[face])
-      if (next >= 0 && chart_of_[next] == -1) heap_.push({Cost(next, chart, face), next, chart, face});
+      if (next >= 0 && chart_of_[next] == -1)
+        heap_.push({Cost(next, chart, face), next, chart, face});
   }
 
   Eigen::Vector3d ChartNormal(int chart) const {
@@ -130,45 +240,14 @@ class ChartGrower {
            (g_.centroids[face] - g_.centroids[from]).norm();
   }
 
-  bool InChart(int v, int chart) const {
-    for (int i = g_.fan_start[v]; i < g_.fan_start[v + 1]; ++i)
-      if (chart_of_[g_.fan[i]] == chart) return true;
-    return false;
-  }
-
   // Whether `face` may join `chart`: normal close enough, and the chart stays a disk.
   bool Accepts(int face, int chart, bool check_normal = true) const {
-    int shared = 0;
-    int unshared = -1;
-    for (int k = 0; k < 3; ++k) {
-      const int next = g_.neighbours[face][k];
-      if (next >= 0 && chart_of_[next] == chart)
-        ++shared;
-      else
-        unshared = k;
-    }
     // The normal test applies to faces at the front only: a face the chart already holds on
     // two sides fills a notch (noise would otherwise leave it a chart of its own).
-    if (check_normal && shared == 1 && ChartNormal(chart).dot(normals_[face]) < min_dot_)
+    if (check_normal && SharedEdges(g_, chart_of_, face, chart) == 1 &&
+        ChartNormal(chart).dot(normals_[face]) < min_dot_)
       return false;
-    const auto& t = g_.faces[face];
-    if (shared == 1) {
-      // One edge shared: the opposite vertex must be new to the chart (else a pinch).
-      for (int k = 0; k < 3; ++k) {
-        const int next = g_.neighbours[face][k];
-        if (next >= 0 && chart_of_[next] == chart) return !InChart(t[(k + 2) % 3], chart);
-      }
-    }
-    if (shared == 2) {
-      // Two edges shared: their common vertex must become interior (its fan complete).
-      const int middle = t[(unshared + 2) % 3];
-      for (int i = g_.fan_start[middle]; i < g_.fan_start[middle + 1]; ++i) {
-        const int other = g_.fan[i];
-        if (other != face && chart_of_[other] != chart) return false;
-      }
-      return true;
-    }
-    return false;  // 0 shared (not adjacent) or 3 (would close the surface)
+    return KeepsDiskWhenJoining(g_, chart_of_, face, chart);
   }
 
   const FaceGraph& g_;
@@ -248,7 +327,8 @@ std::vector<int> SplitChart(const FaceGraph& graph, const std::vector<int>& face
   split_options.seeds = 2;
   split_options.max_normal_deviation_deg = 180.0;  // the split only needs disks
   ChartGrower grower(graph, split_options);
-  const std::vector<int> chart_of = grower.Grow(&seeds, progress, &faces);
+  std::vector<int> chart_of = grower.Grow(&seeds, progress, &faces);
+  SmoothChartBoundaries(graph, &chart_of, kSmoothingPasses);
   std::vector<int> local(faces.size());
   for (std::size_t i = 0; i < faces.size(); ++i) local[i] = chart_of[faces[i]];
   return local;
@@ -261,6 +341,7 @@ void ChartOptions::Validate() const {
     if (!ok) throw InvalidArgument(std::string("ChartOptions.") + field + " must be " + rule);
   };
   check(seeds >= 1, "seeds", ">= 1");
+  check(faces_per_seed >= 100, "faces_per_seed", ">= 100");
   check(max_normal_deviation_deg > 0.0 && max_normal_deviation_deg <= 180.0,
         "max_normal_deviation_deg", "in (0, 180]");
   check(compactness >= 0.0 && std::isfinite(compactness), "compactness", ">= 0");
@@ -281,7 +362,8 @@ ChartsResult ComputeCharts(const Mesh& mesh, const ChartOptions& options, Progre
   for (int f = 0; f < n; ++f) order[f] = f;
   std::shuffle(order.begin(), order.end(), random);
   std::stable_partition(order.begin(), order.end(), [&](int f) { return graph.areas[f] > 0.0; });
-  std::vector<int> seeds(order.begin(), order.begin() + std::min(n, options.seeds));
+  const int seed_count = std::min(n, std::max(options.seeds, n / options.faces_per_seed));
+  std::vector<int> seeds(order.begin(), order.begin() + seed_count);
 
   ChartGrower grower(graph, options);
   ChartsResult result;
@@ -299,6 +381,7 @@ ChartsResult ComputeCharts(const Mesh& mesh, const ChartOptions& options, Progre
     }
     seeds = std::move(upgraded);
   }
+  SmoothChartBoundaries(graph, &result.chart_of_face, kSmoothingPasses);
   progress.EndStage();
   result.seconds = stopwatch.ElapsedSeconds();
   return result;
@@ -328,7 +411,8 @@ std::vector<int> CountChartBoundaryLoops(const Mesh& mesh, const std::vector<int
       visited[h.idx()] = 1;
       // Next boundary halfedge of this chart: rotate around the end vertex.
       auto next = mesh.next_halfedge_handle(h);
-      while (!on_boundary(next, chart)) next = mesh.next_halfedge_handle(mesh.opposite_halfedge_handle(next));
+      while (!on_boundary(next, chart))
+        next = mesh.next_halfedge_handle(mesh.opposite_halfedge_handle(next));
       h = next;
     }
   }

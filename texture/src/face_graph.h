@@ -13,15 +13,15 @@
 namespace carousel::texture::internal {
 
 struct FaceGraph {
-  std::vector<Eigen::Vector3d> positions;       // per vertex
-  std::vector<std::array<int, 3>> faces;        // vertex indices, counter-clockwise
-  std::vector<Eigen::Vector3d> normals;         // per face, unit (zero for degenerate faces)
-  std::vector<double> areas;                    // per face, m^2
-  std::vector<Eigen::Vector3d> centroids;       // per face
-  std::vector<std::array<int, 3>> neighbours;   // face across edge (k, k + 1), or -1
-  std::vector<int> fan_start;                   // faces around vertex v: fan[fan_start[v] ..
-  std::vector<int> fan;                         //   fan_start[v + 1])
-  std::vector<char> boundary_vertex;            // on the mesh's boundary
+  std::vector<Eigen::Vector3d> positions;      // per vertex
+  std::vector<std::array<int, 3>> faces;       // vertex indices, counter-clockwise
+  std::vector<Eigen::Vector3d> normals;        // per face, unit (zero for degenerate faces)
+  std::vector<double> areas;                   // per face, m^2
+  std::vector<Eigen::Vector3d> centroids;      // per face
+  std::vector<std::array<int, 3>> neighbours;  // face across edge (k, k + 1), or -1
+  std::vector<int> fan_start;                  // faces around vertex v: fan[fan_start[v] ..
+  std::vector<int> fan;                        //   fan_start[v + 1])
+  std::vector<char> boundary_vertex;           // on the mesh's boundary
 
   int face_count() const { return static_cast<int>(faces.size()); }
   int vertex_count() const { return static_cast<int>(positions.size()); }

@@ -3,9 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <numbers>
 #include <numeric>
 #include <string>
+#include <tuple>
 
 #include <Eigen/Geometry>
 #include <opencv2/imgproc.hpp>
@@ -19,99 +21,139 @@ namespace {
 // A chart turned into its box: its corners' positions relative to the box's lower corner.
 struct Placed {
   std::vector<int> faces;
+  // Boundary edges in the box frame (metres): the chart is a filled disk, so its extent in
+  // any vertical slab is reached on its boundary.
+  std::vector<std::array<Eigen::Vector2d, 2>> outline;
   Eigen::Vector2d size = Eigen::Vector2d::Zero();  // metres
-  double area = 0.0;                                // flattened area, m^2
+  double area = 0.0;                               // flattened area, m^2
 };
 
-// Skyline bottom-left packing of rectangles into a width x height bin.
-class Skyline {
- public:
-  Skyline(int width, int height) : width_(width), height_(height) { segments_.push_back({0, 0, width}); }
+// The chart turned by `quarter` quarter turns inside its box (a rotation: orientation kept).
+Eigen::Vector2d Turn(const Eigen::Vector2d& p, const Eigen::Vector2d& size, int quarter) {
+  switch (quarter) {
+    case 1:
+      return {size.y() - p.y(), p.x()};
+    case 2:
+      return {size.x() - p.x(), size.y() - p.y()};
+    case 3:
+      return {p.y(), size.x() - p.x()};
+    default:
+      return p;
+  }
+}
 
-  // Places a w x h rectangle (or h x w); returns false when it does not fit.
-  bool Place(int w, int h, int* x, int* y, bool* rotated) {
-    int best_y = std::numeric_limits<int>::max();
-    int best_x = 0;
-    std::size_t best_i = 0;
-    int best_w = 0;
-    int best_h = 0;
-    for (const bool turn : {false, true}) {
-      const int rw = turn ? h : w;
-      const int rh = turn ? w : h;
-      for (std::size_t i = 0; i < segments_.size(); ++i) {
-        const int left = segments_[i].x;
-        if (left + rw > width_) break;
-        int top = 0;
-        int covered = 0;
-        for (std::size_t j = i; j < segments_.size() && covered < rw; ++j) {
-          top = std::max(top, segments_[j].y);
-          covered = segments_[j].x + segments_[j].width - left;
-        }
-        if (top + rh > height_) continue;
-        if (top + rh < best_y + best_h || (top + rh == best_y + best_h && left < best_x)) {
-          best_y = top;
-          best_x = left;
-          best_i = i;
-          best_w = rw;
-          best_h = rh;
-          *rotated = turn;
+// A chart at a density and turn, as the packer sees it: per column of `block` texels, the
+// lowest and highest texel row it occupies (its gutter included), relative to its origin.
+struct Profile {
+  std::vector<double> bottom, top;  // +inf / -inf for empty columns
+  double height = 0.0;
+};
+
+constexpr double kEmpty = std::numeric_limits<double>::infinity();
+
+Profile MakeProfile(const Placed& chart, double density, int quarter, int block, double margin) {
+  const Eigen::Vector2d turned_size =
+      quarter % 2 == 0 ? chart.size : Eigen::Vector2d(chart.size.y(), chart.size.x());
+  const double width = turned_size.x() * density + 2 * margin;
+  const int columns = std::max(1, static_cast<int>(std::ceil(width / block)));
+  Profile profile;
+  profile.bottom.assign(columns, kEmpty);
+  profile.top.assign(columns, -kEmpty);
+  profile.height = turned_size.y() * density + 2 * margin;
+  auto extend = [&](int column, double y) {
+    if (column < 0 || column >= columns) return;
+    profile.bottom[column] = std::min(profile.bottom[column], y);
+    profile.top[column] = std::max(profile.top[column], y);
+  };
+  for (const auto& edge : chart.outline) {
+    const Eigen::Vector2d a =
+        Turn(edge[0], chart.size, quarter) * density + Eigen::Vector2d(margin, margin);
+    const Eigen::Vector2d b =
+        Turn(edge[1], chart.size, quarter) * density + Eigen::Vector2d(margin, margin);
+    // The edge's y extent in each column slab it spans: its ends, and where it crosses the
+    // slabs' sides.
+    extend(static_cast<int>(a.x() / block), a.y());
+    extend(static_cast<int>(b.x() / block), b.y());
+    const double lo = std::min(a.x(), b.x());
+    const double hi = std::max(a.x(), b.x());
+    for (int side = static_cast<int>(std::ceil(lo / block)); side * block <= hi; ++side) {
+      const double x = static_cast<double>(side) * block;
+      const double w = hi > lo ? (x - a.x()) / (b.x() - a.x()) : 0.0;
+      const double y = a.y() + std::clamp(w, 0.0, 1.0) * (b.y() - a.y());
+      extend(side - 1, y);
+      extend(side, y);
+    }
+  }
+  // The gutter: half of it on every side of the chart (the other half is the neighbour's).
+  const int spread = static_cast<int>(std::ceil(margin / block));
+  std::vector<double> bottom = profile.bottom;
+  std::vector<double> top = profile.top;
+  for (int c = 0; c < columns; ++c)
+    for (int d = -spread; d <= spread; ++d) {
+      if (c + d < 0 || c + d >= columns) continue;
+      bottom[c] = std::min(bottom[c], profile.bottom[c + d]);
+      top[c] = std::max(top[c], profile.top[c + d]);
+    }
+  for (int c = 0; c < columns; ++c) {
+    if (bottom[c] == kEmpty) continue;
+    profile.bottom[c] = std::max(0.0, bottom[c] - margin);
+    profile.top[c] = std::min(profile.height, top[c] + margin);
+  }
+  return profile;
+}
+
+struct Layout {
+  std::vector<Eigen::Vector2d> origin;  // texel position of each chart's turned box
+  std::vector<int> quarter;             // its turn
+};
+
+// Places the charts, largest first, each at the column where it comes to rest lowest (its
+// profile dropped onto the atlas's skyline, Tetris-like), trying every allowed turn; false
+// when one does not fit.
+bool TryPack(const std::vector<Placed>& charts, const std::vector<int>& order, double density,
+             const PackingOptions& options, Layout* layout) {
+  const int block = std::max(1, options.size / 512);
+  const int columns = options.size / block;
+  std::vector<double> skyline(columns, 0.0);
+  layout->origin.assign(charts.size(), Eigen::Vector2d::Zero());
+  layout->quarter.assign(charts.size(), 0);
+  const double margin = 0.5 * options.gutter_texels;
+  const int turns = options.mode == PackingMode::kObb ? 4 : 1;
+  for (const int c : order) {
+    double best_score = kEmpty;
+    int best_column = 0;
+    int best_quarter = 0;
+    double best_y = 0.0;
+    std::array<Profile, 4> profiles;
+    for (int quarter = 0; quarter < turns; ++quarter) {
+      profiles[quarter] = MakeProfile(charts[c], density, quarter, block, margin);
+      const Profile& profile = profiles[quarter];
+      const int width = static_cast<int>(profile.bottom.size());
+      for (int x = 0; x + width <= columns; ++x) {
+        double y = 0.0;
+        for (int i = 0; i < width; ++i)
+          if (profile.bottom[i] != kEmpty) y = std::max(y, skyline[x + i] - profile.bottom[i]);
+        if (y + profile.height > options.size) continue;
+        // Lowest rest first; then the least space left under the chart.
+        double waste = 0.0;
+        for (int i = 0; i < width; ++i)
+          if (profile.bottom[i] != kEmpty) waste += y + profile.bottom[i] - skyline[x + i];
+        const double score = (y + profile.height) * options.size * 4.0 + waste;
+        if (score < best_score) {
+          best_score = score;
+          best_column = x;
+          best_quarter = quarter;
+          best_y = y;
         }
       }
     }
-    if (best_y == std::numeric_limits<int>::max()) return false;
-    *x = best_x;
-    *y = best_y;
-    // Raise the skyline over [best_x, best_x + best_w).
-    std::vector<Segment> next(segments_.begin(), segments_.begin() + static_cast<long>(best_i));
-    next.push_back({best_x, best_y + best_h, best_w});
-    for (std::size_t j = best_i; j < segments_.size(); ++j) {
-      const Segment& s = segments_[j];
-      const int end = s.x + s.width;
-      if (end <= best_x + best_w) continue;
-      const int start = std::max(s.x, best_x + best_w);
-      next.push_back({start, s.y, end - start});
-    }
-    // Merge neighbours of equal height.
-    segments_.clear();
-    for (const Segment& s : next) {
-      if (!segments_.empty() && segments_.back().y == s.y)
-        segments_.back().width += s.width;
-      else
-        segments_.push_back(s);
-    }
-    return true;
-  }
-
- private:
-  struct Segment {
-    int x, y, width;
-  };
-  int width_;
-  int height_;
-  std::vector<Segment> segments_;
-};
-
-struct Layout {
-  std::vector<Eigen::Vector2i> origin;  // texel position of each chart's box (inside its gutter)
-  std::vector<char> rotated;
-};
-
-// Packs the boxes at `density` texels per metre; false when they do not all fit.
-bool TryPack(const std::vector<Placed>& charts, const std::vector<int>& order, double density,
-             const PackingOptions& options, Layout* layout) {
-  Skyline skyline(options.size, options.size);
-  layout->origin.assign(charts.size(), Eigen::Vector2i::Zero());
-  layout->rotated.assign(charts.size(), 0);
-  const int g = options.gutter_texels;
-  for (const int c : order) {
-    const int w = static_cast<int>(std::ceil(charts[c].size.x() * density)) + g;
-    const int h = static_cast<int>(std::ceil(charts[c].size.y() * density)) + g;
-    int x = 0;
-    int y = 0;
-    bool rotated = false;
-    if (!skyline.Place(w, h, &x, &y, &rotated)) return false;
-    layout->origin[c] = Eigen::Vector2i(x + g / 2, y + g / 2);
-    layout->rotated[c] = rotated ? 1 : 0;
+    if (best_score == kEmpty) return false;
+    const Profile& profile = profiles[best_quarter];
+    for (std::size_t i = 0; i < profile.top.size(); ++i)
+      if (profile.top[i] != -kEmpty) skyline[best_column + i] = best_y + profile.top[i];
+    layout->origin[c] =
+        Eigen::Vector2d(static_cast<double>(best_column) * block + margin, best_y + margin);
+    layout->quarter[c] = best_quarter;
   }
   return true;
 }
@@ -178,9 +220,24 @@ PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
     for (const int f : chart.faces) {
       for (auto& p : result.uv[f]) p -= bounds.min();
       const auto& t = result.uv[f];
-      chart.area += 0.5 * ((t[1] - t[0]).x() * (t[2] - t[0]).y() - (t[1] - t[0]).y() * (t[2] - t[0]).x());
+      chart.area +=
+          0.5 * ((t[1] - t[0]).x() * (t[2] - t[0]).y() - (t[1] - t[0]).y() * (t[2] - t[0]).x());
     }
     chart.size = bounds.sizes();
+    // Boundary edges: those of one face only (a chart's shared corners have equal UVs).
+    std::map<std::array<double, 4>, int> edges;
+    for (const int f : chart.faces)
+      for (int k = 0; k < 3; ++k) {
+        const Eigen::Vector2d& a = result.uv[f][k];
+        const Eigen::Vector2d& b = result.uv[f][(k + 1) % 3];
+        const bool forward = std::tie(a.x(), a.y()) < std::tie(b.x(), b.y());
+        const Eigen::Vector2d& lo = forward ? a : b;
+        const Eigen::Vector2d& hi = forward ? b : a;
+        ++edges[{lo.x(), lo.y(), hi.x(), hi.y()}];
+      }
+    for (const auto& [key, count] : edges)
+      if (count == 1)
+        chart.outline.push_back({Eigen::Vector2d(key[0], key[1]), Eigen::Vector2d(key[2], key[3])});
   }
   // Largest boxes first (by height, then width).
   std::vector<int> order(charts);
@@ -195,7 +252,7 @@ PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
   double total_area = 0.0;
   double longest = 0.0;
   for (const Placed& chart : placed) {
-    total_area += chart.size.x() * chart.size.y();
+    total_area += chart.area;
     longest = std::max({longest, chart.size.x(), chart.size.y()});
   }
   const double usable = options.size - options.gutter_texels;
@@ -214,7 +271,7 @@ PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
     } else {
       high = density;
     }
-    if (high - low < 1e-4 * high) break;
+    if (high - low < 4e-3 * high) break;
     progress.Report(static_cast<double>(iteration + 1) / 30.0);
   }
   CAROUSEL_THROW_IF(!(low > 0.0), InvalidArgument,
@@ -228,9 +285,7 @@ PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
     chart_texels += chart.area * low * low;
     for (const int f : chart.faces)
       for (auto& p : result.uv[f]) {
-        Eigen::Vector2d t = p * low;  // texels inside the box
-        if (best.rotated[c]) t = Eigen::Vector2d(std::ceil(chart.size.y() * low) - t.y(), t.x());
-        const Eigen::Vector2d texel = best.origin[c].cast<double>() + t;
+        const Eigen::Vector2d texel = best.origin[c] + Turn(p, chart.size, best.quarter[c]) * low;
         // The packer's rows count from the bottom: v up, orientation kept (a 90-degree turn
         // is a rotation).
         p = texel / options.size;

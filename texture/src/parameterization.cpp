@@ -108,7 +108,8 @@ bool SolveAbf(const FaceGraph& g, const Chart& chart, const ParameterizationOpti
   std::vector<double> angle_sum(interior, 0.0);
   for (int i = 0; i < nf; ++i)
     for (int k = 0; k < 3; ++k)
-      if (row_of[chart.corners[i][k]] >= 0) angle_sum[row_of[chart.corners[i][k]]] += beta[3 * i + k];
+      if (row_of[chart.corners[i][k]] >= 0)
+        angle_sum[row_of[chart.corners[i][k]]] += beta[3 * i + k];
   for (int i = 0; i < nf; ++i)
     for (int k = 0; k < 3; ++k)
       if (row_of[chart.corners[i][k]] >= 0)
@@ -160,8 +161,8 @@ bool SolveAbf(const FaceGraph& g, const Chart& chart, const ParameterizationOpti
       }
     }
     for (int row = 0; row < interior; ++row) c2[row] -= 2 * kPi;
-    const double worst = std::max(c1.cwiseAbs().maxCoeff(),
-                                  interior > 0 ? c2.cwiseAbs().maxCoeff() : 0.0);
+    const double worst =
+        std::max(c1.cwiseAbs().maxCoeff(), interior > 0 ? c2.cwiseAbs().maxCoeff() : 0.0);
     if (!std::isfinite(worst)) return false;
     if (worst < options.abf_tolerance) return true;
 
@@ -169,7 +170,8 @@ bool SolveAbf(const FaceGraph& g, const Chart& chart, const ParameterizationOpti
     Eigen::VectorXd offset(n);
     for (int i = 0; i < n; ++i) offset[i] = a[i] - beta[i];
     Eigen::VectorXd r1(nf);
-    for (int i = 0; i < nf; ++i) r1[i] = c1[i] - (offset[3 * i] + offset[3 * i + 1] + offset[3 * i + 2]);
+    for (int i = 0; i < nf; ++i)
+      r1[i] = c1[i] - (offset[3 * i] + offset[3 * i + 1] + offset[3 * i + 2]);
     Eigen::VectorXd lambda1(nf);
     Eigen::VectorXd step(n);
     if (interior == 0) {
@@ -233,7 +235,8 @@ std::vector<Eigen::Vector2d> Reconstruct(const FaceGraph& g, const Chart& chart,
     double best_d = -1.0;
     for (int v = 0; v < nv; ++v) {
       if (chart.interior[v]) continue;
-      const double dist = (g.positions[chart.vertices[v]] - g.positions[chart.vertices[from]]).norm();
+      const double dist =
+          (g.positions[chart.vertices[v]] - g.positions[chart.vertices[from]]).norm();
       if (dist > best_d) {
         best_d = dist;
         best = v;
@@ -244,7 +247,8 @@ std::vector<Eigen::Vector2d> Reconstruct(const FaceGraph& g, const Chart& chart,
   const int pin0 = farthest(first);
   const int pin1 = farthest(pin0);
   if (pin0 == pin1) return {};
-  const double span = (g.positions[chart.vertices[pin1]] - g.positions[chart.vertices[pin0]]).norm();
+  const double span =
+      (g.positions[chart.vertices[pin1]] - g.positions[chart.vertices[pin0]]).norm();
   uv[pin0] = Eigen::Vector2d(0.0, 0.0);
   uv[pin1] = Eigen::Vector2d(span > 0.0 ? span : 1.0, 0.0);
   // Unknown index of each vertex's u (v follows), -1 for pins.
@@ -411,8 +415,7 @@ void ParameterizationOptions::Validate() const {
     if (!ok)
       throw InvalidArgument(std::string("ParameterizationOptions.") + field + " must be " + rule);
   };
-  check(max_abf_iterations >= 0 && max_abf_iterations <= 100, "max_abf_iterations",
-        "in [0, 100]");
+  check(max_abf_iterations >= 0 && max_abf_iterations <= 100, "max_abf_iterations", "in [0, 100]");
   check(abf_tolerance > 0.0 && std::isfinite(abf_tolerance), "abf_tolerance", "> 0");
   check(max_split_depth >= 0 && max_split_depth <= 64, "max_split_depth", "in [0, 64]");
   check(threads >= 0, "threads", ">= 0");
@@ -488,7 +491,8 @@ ParameterizationResult ParameterizeCharts(const Mesh& mesh, const std::vector<in
       const std::size_t first = next.size();
       next.resize(first + n_parts);
       next_depth.resize(first + n_parts, depth[c] + 1);
-      for (std::size_t i = 0; i < parts.size(); ++i) next[first + parts[i]].push_back(pending[c][i]);
+      for (std::size_t i = 0; i < parts.size(); ++i)
+        next[first + parts[i]].push_back(pending[c][i]);
     }
     pending = std::move(next);
     depth = std::move(next_depth);

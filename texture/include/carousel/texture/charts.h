@@ -11,7 +11,10 @@
 // its boundary inward in rings (Dijkstra over face centroids, Cost2 = |P_F' - P_F|); the face
 // of the last ring is its new seed; all charts regrow from the new seeds until no seed moves.
 // Costs are evaluated lazily: an entry whose chart normal changed since it was queued is
-// re-queued with its current cost when it reaches the top of the heap.
+// re-queued with its current cost when it reaches the top of the heap. Finally the chart
+// boundaries are straightened: a face sharing more edges with a neighbouring chart than with
+// its own moves there when both stay disks (noise leaves ragged boundaries that flatten and
+// pack badly).
 #pragma once
 
 #include <cstdint>
@@ -23,8 +26,11 @@
 namespace carousel::texture {
 
 struct ChartOptions {
-  // Initial seeds (the paper's default: 10), >= 1.
+  // Initial seeds (the paper's default: 10), >= 1 ...
   int seeds = 10;
+  // ... but at least one per this many faces, >= 100: the paper's meshes have 4,500 faces; on
+  // a 200k-face reconstruction 10 charts would be huge, slow to flatten and hard to pack.
+  int faces_per_seed = 2500;
   // A face joins a chart only if its normal is within this angle of the chart's mean normal,
   // degrees, (0, 180]; 180 = the paper's unbounded growth.
   double max_normal_deviation_deg = 70.0;

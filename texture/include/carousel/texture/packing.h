@@ -2,12 +2,14 @@
 //
 // Every chart gets the same texel density (texels per metre of surface; the flattened charts
 // are area-preserving, in metres). In OBB mode each chart is turned into its minimum-area
-// oriented bounding box (rotating calipers over its convex hull, OpenCV's minAreaRect); in
-// AABB mode it keeps its orientation (the paper's comparison). The boxes, each grown by the
-// gutter, are packed by a skyline bottom-left packer (largest first, each box tried in both
-// orientations), and the density is the largest that fits the atlas (bisection). Charts are
-// at least `gutter_texels` apart, so dilating each chart's texels by half the gutter (for
-// bilinear filtering and mip levels) never reaches another chart.
+// oriented bounding box (rotating calipers over its convex hull, OpenCV's minAreaRect) and may
+// be placed in any of its four quarter turns; in AABB mode it keeps its orientation (the
+// paper's comparison). Placement is Tetris-like: largest charts first, each chart's outline
+// profile (per column of atlas blocks, the lowest and highest row it covers, gutter included)
+// is dropped onto the atlas's skyline at the column and turn where it comes to rest lowest,
+// so charts interlock instead of sitting in boxes. The density is the largest at which every
+// chart fits (bisection). Charts are at least `gutter_texels` apart, so dilating each chart's
+// texels by half the gutter (bilinear filtering, mip levels) never reaches another chart.
 #pragma once
 
 #include <array>
