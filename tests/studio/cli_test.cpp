@@ -179,6 +179,17 @@ TEST(CliBinaryTest, TextureAtlasOfAMesh) {
             kExitUsage);
   EXPECT_EQ(RunBinary("texture atlas " + (dir / "missing.obj").string() + " --out " + out).code,
             kExitIoError);
+  // Three faces on one edge (non-manifold): reading repairs it by duplicating the edge's
+  // vertices for the third face; no face goes missing and every face gets UVs.
+  testing::WriteBytes(dir / "fin.obj",
+                      "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 -1 0\nv 0 0 1\n"
+                      "f 1 2 3\nf 2 1 4\nf 1 2 5\n");
+  const CliResult fin = RunBinary("texture atlas " + (dir / "fin.obj").string() + " --out " +
+                                  (dir / "fin_atlas.obj").string() + " --size 256");
+  ASSERT_EQ(fin.code, 0) << fin.out;
+  const Mesh fin_atlas = ReadMesh(dir / "fin_atlas.obj");
+  EXPECT_EQ(fin_atlas.n_faces(), 3u);
+  EXPECT_TRUE(fin_atlas.has_uvs());
 }
 
 // The reconstruction stage on a small simulated session: masks, hull and mesh appear, the
