@@ -36,7 +36,7 @@ struct ChartOptions {
   double max_normal_deviation_deg = 70.0;
   // Weight of the distance from the chart's seed in the growth cost (relative to the chart
   // size the seed count implies), >= 0: keeps charts round, so they pack tightly.
-  double compactness = 0.05;
+  double compactness = 0.3;
   // Seed upgrades at most, >= 0 (0: grow once from the initial seeds).
   int max_iterations = 8;
   // Random seed of the initial seed choice (deterministic results).
