@@ -372,6 +372,35 @@ bool IsValid(const FaceGraph& g, const Chart& chart, const std::vector<int>& cha
   return true;
 }
 
+// The chart's area-weighted L2 texture stretch (Sander et al. 2001), the UV area equal to the
+// surface area. Angle-preserving maps shrink protrusions (a tip, a tab) exponentially: such a
+// chart has faces with a hundredth of the texels of the others and a large stretch.
+double ChartStretch(const FaceGraph& g, const Chart& chart,
+                    const std::vector<Eigen::Vector2d>& uv) {
+  double sum = 0.0;
+  double area = 0.0;
+  for (std::size_t i = 0; i < chart.faces.size(); ++i) {
+    const auto& c = chart.corners[i];
+    const double a_uv = 0.5 * Cross(uv[c[1]] - uv[c[0]], uv[c[2]] - uv[c[0]]);
+    const double a_3d = g.areas[chart.faces[i]];
+    if (!(a_uv > 0.0) || !(a_3d > 0.0)) continue;
+    const auto& t = g.faces[chart.faces[i]];
+    const Eigen::Vector3d& p1 = g.positions[t[0]];
+    const Eigen::Vector3d& p2 = g.positions[t[1]];
+    const Eigen::Vector3d& p3 = g.positions[t[2]];
+    const Eigen::Vector2d& q1 = uv[c[0]];
+    const Eigen::Vector2d& q2 = uv[c[1]];
+    const Eigen::Vector2d& q3 = uv[c[2]];
+    const Eigen::Vector3d ss =
+        (p1 * (q2.y() - q3.y()) + p2 * (q3.y() - q1.y()) + p3 * (q1.y() - q2.y())) / (2 * a_uv);
+    const Eigen::Vector3d st =
+        (p1 * (q3.x() - q2.x()) + p2 * (q1.x() - q3.x()) + p3 * (q2.x() - q1.x())) / (2 * a_uv);
+    sum += 0.5 * (ss.squaredNorm() + st.squaredNorm()) * a_3d;
+    area += a_3d;
+  }
+  return area > 0.0 ? std::sqrt(sum / area) : 1.0;
+}
+
 struct Flattened {
   bool valid = false;
   bool abf_converged = true;
@@ -404,7 +433,9 @@ Flattened Flatten(const FaceGraph& g, const Chart& chart, const std::vector<int>
     const double s = std::sqrt(area_3d / area_2d);
     for (auto& p : out.uv) p *= s;
   }
-  out.valid = IsValid(g, chart, chart_of_face, out.uv);
+  out.valid =
+      IsValid(g, chart, chart_of_face, out.uv) &&
+      (chart.faces.size() == 1 || ChartStretch(g, chart, out.uv) <= options.max_chart_stretch);
   return out;
 }
 
@@ -418,6 +449,7 @@ void ParameterizationOptions::Validate() const {
   check(max_abf_iterations >= 0 && max_abf_iterations <= 100, "max_abf_iterations", "in [0, 100]");
   check(abf_tolerance > 0.0 && std::isfinite(abf_tolerance), "abf_tolerance", "> 0");
   check(max_split_depth >= 0 && max_split_depth <= 64, "max_split_depth", "in [0, 64]");
+  check(max_chart_stretch >= 1.0 && std::isfinite(max_chart_stretch), "max_chart_stretch", ">= 1");
   check(threads >= 0, "threads", ">= 0");
 }
 
@@ -502,7 +534,8 @@ ParameterizationResult ParameterizeCharts(const Mesh& mesh, const std::vector<in
   result.charts = next_id;
   if (result.charts_split > 0)
     CAROUSEL_LOG_INFO("atlas: " << result.charts_split
-                                << " chart(s) did not flatten one-to-one and were split");
+                                << " chart(s) did not flatten one-to-one or within the stretch "
+                                   "bound and were split");
   progress.EndStage();
   result.seconds = stopwatch.ElapsedSeconds();
   return result;

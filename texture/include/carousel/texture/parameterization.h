@@ -14,8 +14,9 @@
 //   sin a3 (e3 - e1) = sin a2 R(a1) (e2 - e1),
 // two boundary vertices pinned, solved by sparse Cholesky of the normal equations.
 // Every chart is checked: no flipped or degenerate UV triangle and a boundary that does not
-// cross itself (with both, the map is one-to-one). A chart that fails is split in two (regrown
-// from two far-apart seeds, each half a disk) and flattened again; it is never shipped.
+// cross itself (with both, the map is one-to-one), and a stretch under max_chart_stretch (an
+// angle-preserving map can shrink a protrusion a hundredfold). A chart that fails is split in two
+// (regrown from two far-apart seeds, each half a disk) and flattened again; it is never shipped.
 // Sliver and zero-area triangles get clamped angles (no NaNs). UVs are in metres: each chart
 // is scaled so that its flattened area equals its surface area.
 #pragma once
@@ -37,6 +38,9 @@ struct ParameterizationOptions {
   double abf_tolerance = 1e-7;
   // A chart that will not flatten validly is split at most this many times over, 0..64.
   int max_split_depth = 24;
+  // A chart whose L2 stretch (its UV area equal to its surface area) exceeds this is split as
+  // well, >= 1: an angle-preserving map shrinks protrusions, starving them of texels.
+  double max_chart_stretch = 1.25;
   // Worker threads; 0 = one per hardware thread.
   int threads = 0;
   void Validate() const;
