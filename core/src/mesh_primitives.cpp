@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "carousel/core/error.h"
+#include "carousel/core/marching_tetrahedra.h"
 
 namespace carousel {
 namespace {
@@ -189,10 +190,8 @@ Mesh MakeMarchingBlob(int resolution, double noise, std::uint64_t seed) {
         if (f == 0.0) f = -1e-12;
         field[index(i, j, k)] = f;
       }
-  // Marching tetrahedra: the six Freudenthal tetrahedra of each cube, a vertex per edge that
-  // changes sign (keyed by the edge's first corner and direction).
-  constexpr std::array<std::array<int, 4>, 6> kTets = {
-      {{0, 1, 3, 7}, {0, 1, 5, 7}, {0, 2, 3, 7}, {0, 2, 6, 7}, {0, 4, 5, 7}, {0, 4, 6, 7}}};
+  // Marching tetrahedra (marching_tetrahedra.h), a vertex per edge that changes sign (keyed
+  // by the edge's first corner and direction).
   Mesh mesh;
   std::map<std::uint64_t, VertexHandle> vertex_of_edge;
   for (int k = 0; k < resolution; ++k)
@@ -223,40 +222,16 @@ Mesh MakeMarchingBlob(int resolution, double noise, std::uint64_t seed) {
           vertex_of_edge.emplace(edge_key, v);
           return v;
         };
-        auto emit = [&](VertexHandle a, VertexHandle b, VertexHandle c, const Vec3d& towards_out) {
-          const Vec3d normal = (mesh.point(b) - mesh.point(a)) % (mesh.point(c) - mesh.point(a));
-          if ((normal | towards_out) < 0) std::swap(b, c);
-          AddTriangle(mesh, a, b, c);
-        };
-        for (const auto& tet : kTets) {
-          std::array<int, 4> in{}, out{};
-          int n_in = 0;
-          int n_out = 0;
-          Vec3d centre_in(0, 0, 0), centre_out(0, 0, 0);
-          for (const int c : tet) {
-            if (value[c] > 0) {
-              in[n_in++] = c;
-              centre_in += position[c];
-            } else {
-              out[n_out++] = c;
-              centre_out += position[c];
-            }
-          }
-          if (n_in == 0 || n_out == 0) continue;
-          const Vec3d towards_out = centre_out / n_out - centre_in / n_in;
-          if (n_in == 1 || n_out == 1) {
-            const int apex = n_in == 1 ? in[0] : out[0];
-            const auto& others = n_in == 1 ? out : in;
-            emit(edge(apex, others[0]), edge(apex, others[1]), edge(apex, others[2]), towards_out);
-          } else {
-            const VertexHandle e0 = edge(in[0], out[0]);
-            const VertexHandle e1 = edge(in[0], out[1]);
-            const VertexHandle e2 = edge(in[1], out[1]);
-            const VertexHandle e3 = edge(in[1], out[0]);
-            emit(e0, e1, e2, towards_out);
-            emit(e0, e2, e3, towards_out);
-          }
-        }
+        MarchCube(value, position,
+                  [&](const std::array<std::array<int, 2>, 3>& edges, const Vec3d& towards_out) {
+                    const VertexHandle v0 = edge(edges[0][0], edges[0][1]);
+                    VertexHandle v1 = edge(edges[1][0], edges[1][1]);
+                    VertexHandle v2 = edge(edges[2][0], edges[2][1]);
+                    const Vec3d normal =
+                        (mesh.point(v1) - mesh.point(v0)) % (mesh.point(v2) - mesh.point(v0));
+                    if ((normal | towards_out) < 0) std::swap(v1, v2);
+                    AddTriangle(mesh, v0, v1, v2);
+                  });
       }
   mesh.RecomputeNormals();
   return mesh;

@@ -13,6 +13,7 @@
 
 #include "carousel/core/error.h"
 #include "carousel/core/logging.h"
+#include "carousel/core/marching_tetrahedra.h"
 #include "carousel/core/mesh_query.h"
 #include "carousel/core/parallel.h"
 #include "carousel/core/timer.h"
@@ -201,11 +202,6 @@ std::filesystem::path MasksLocation(const std::vector<View>& views) {
   return "silhouettes (in memory)";
 }
 
-// Cube corners: bit 0 = +x, bit 1 = +y, bit 2 = +z. The six Freudenthal tetrahedra share the
-// main diagonal 0-7; every edge goes from a corner to one with coordinates >= its own.
-constexpr std::array<std::array<int, 4>, 6> kTetrahedra = {
-    {{0, 1, 3, 7}, {0, 1, 5, 7}, {0, 2, 3, 7}, {0, 2, 6, 7}, {0, 4, 5, 7}, {0, 4, 6, 7}}};
-
 // The finest grid: corner (i, j, k) lies at origin + voxel * (i, j, k).
 struct GridFrame {
   Eigen::Vector3d origin;
@@ -310,47 +306,17 @@ Contour ContourCells(const std::vector<Eigen::Vector3i>& cells, int level, const
         chunk.positions.push_back(position[a] + t * (position[b] - position[a]));
         return entry;
       };
-      auto emit = [&](std::uint32_t e0, std::uint32_t e1, std::uint32_t e2,
-                      const Eigen::Vector3d& inside, const Eigen::Vector3d& outside) {
-        const Eigen::Vector3d n = (chunk.positions[e1] - chunk.positions[e0])
-                                      .cross(chunk.positions[e2] - chunk.positions[e0]);
-        if (n.dot(outside - inside) < 0.0) std::swap(e1, e2);
-        chunk.triangles.push_back({e0, e1, e2});
-      };
-      for (const auto& tet : kTetrahedra) {
-        std::array<int, 4> in{}, out{};
-        int n_in = 0;
-        int n_out = 0;
-        Eigen::Vector3d centre_in = Eigen::Vector3d::Zero();
-        Eigen::Vector3d centre_out = Eigen::Vector3d::Zero();
-        for (const int corner : tet) {
-          if (value[corner] > 0.0) {
-            in[n_in++] = corner;
-            centre_in += position[corner];
-          } else {
-            out[n_out++] = corner;
-            centre_out += position[corner];
-          }
-        }
-        if (n_in == 0 || n_out == 0) continue;
-        centre_in /= n_in;
-        centre_out /= n_out;
-        if (n_in == 1 || n_out == 1) {
-          const int apex = n_in == 1 ? in[0] : out[0];
-          const auto& others = n_in == 1 ? out : in;
-          const std::uint32_t e0 = edge(apex, others[0]);
-          const std::uint32_t e1 = edge(apex, others[1]);
-          const std::uint32_t e2 = edge(apex, others[2]);
-          emit(e0, e1, e2, centre_in, centre_out);
-        } else {
-          const std::uint32_t e0 = edge(in[0], out[0]);
-          const std::uint32_t e1 = edge(in[0], out[1]);
-          const std::uint32_t e2 = edge(in[1], out[1]);
-          const std::uint32_t e3 = edge(in[1], out[0]);
-          emit(e0, e1, e2, centre_in, centre_out);
-          emit(e0, e2, e3, centre_in, centre_out);
-        }
-      }
+      MarchCube(value, position,
+                [&](const std::array<std::array<int, 2>, 3>& edges,
+                    const Eigen::Vector3d& towards_outside) {
+                  std::uint32_t e0 = edge(edges[0][0], edges[0][1]);
+                  std::uint32_t e1 = edge(edges[1][0], edges[1][1]);
+                  std::uint32_t e2 = edge(edges[2][0], edges[2][1]);
+                  const Eigen::Vector3d n = (chunk.positions[e1] - chunk.positions[e0])
+                                                .cross(chunk.positions[e2] - chunk.positions[e0]);
+                  if (n.dot(towards_outside) < 0.0) std::swap(e1, e2);
+                  chunk.triangles.push_back({e0, e1, e2});
+                });
     }
   });
   // Merge: one vertex per edge key (entries sorted by key), triangles renumbered.

@@ -33,28 +33,38 @@ bool TouchesChart(const FaceGraph& g, const std::vector<int>& chart_of, int v, i
   return false;
 }
 
+// How `face`'s edges (edge k joins corners k and k + 1) meet `chart`: the number shared, one
+// shared edge and one not shared (-1 if none).
+struct EdgesWith {
+  int shared = 0;
+  int one = -1;
+  int unshared = -1;
+};
+EdgesWith ClassifyEdges(const FaceGraph& g, const std::vector<int>& chart_of, int face, int chart) {
+  EdgesWith e;
+  for (int k = 0; k < 3; ++k) {
+    const int next = g.neighbours[face][k];
+    if (next >= 0 && chart_of[next] == chart) {
+      ++e.shared;
+      e.one = k;
+    } else {
+      e.unshared = k;
+    }
+  }
+  return e;
+}
+
 // Whether `chart` (a disk) stays a disk when `face`, next to it, joins it: one boundary loop,
 // no pinched vertex. O(valence).
 bool KeepsDiskWhenJoining(const FaceGraph& g, const std::vector<int>& chart_of, int face,
                           int chart) {
-  int shared = 0;
-  int unshared = -1;
-  int one = -1;
-  for (int k = 0; k < 3; ++k) {
-    const int next = g.neighbours[face][k];
-    if (next >= 0 && chart_of[next] == chart) {
-      ++shared;
-      one = k;
-    } else {
-      unshared = k;
-    }
-  }
+  const EdgesWith e = ClassifyEdges(g, chart_of, face, chart);
   const auto& t = g.faces[face];
   // One edge shared: the opposite vertex must be new to the chart (else a pinch).
-  if (shared == 1) return !TouchesChart(g, chart_of, t[(one + 2) % 3], chart, face);
-  if (shared == 2) {
+  if (e.shared == 1) return !TouchesChart(g, chart_of, t[(e.one + 2) % 3], chart, face);
+  if (e.shared == 2) {
     // Two edges shared: their common vertex must become interior (its fan complete).
-    const int middle = t[(unshared + 2) % 3];
+    const int middle = t[(e.unshared + 2) % 3];
     for (int i = g.fan_start[middle]; i < g.fan_start[middle + 1]; ++i)
       if (g.fan[i] != face && chart_of[g.fan[i]] != chart) return false;
     return true;
@@ -65,24 +75,13 @@ bool KeepsDiskWhenJoining(const FaceGraph& g, const std::vector<int>& chart_of, 
 // Whether `chart` (a disk holding `face`) stays a disk without it.
 bool KeepsDiskWhenLeaving(const FaceGraph& g, const std::vector<int>& chart_of, int face,
                           int chart) {
-  int shared = 0;
-  int unshared = -1;
-  int one = -1;
-  for (int k = 0; k < 3; ++k) {
-    const int next = g.neighbours[face][k];
-    if (next >= 0 && chart_of[next] == chart) {
-      ++shared;
-      one = k;
-    } else {
-      unshared = k;
-    }
-  }
+  const EdgesWith e = ClassifyEdges(g, chart_of, face, chart);
   const auto& t = g.faces[face];
   // A leaf: its free vertex must belong to no other face of the chart.
-  if (shared == 1) return !TouchesChart(g, chart_of, t[(one + 2) % 3], chart, face);
-  if (shared == 2) {
+  if (e.shared == 1) return !TouchesChart(g, chart_of, t[(e.one + 2) % 3], chart, face);
+  if (e.shared == 2) {
     // A notch appears at the common vertex of the shared edges: it must be interior now.
-    const int middle = t[(unshared + 2) % 3];
+    const int middle = t[(e.unshared + 2) % 3];
     if (g.boundary_vertex[middle]) return false;
     for (int i = g.fan_start[middle]; i < g.fan_start[middle + 1]; ++i)
       if (chart_of[g.fan[i]] != chart) return false;
