@@ -8,6 +8,7 @@
 
 #include "carousel/core/error.h"
 #include "carousel/core/parallel.h"
+#include "carousel/core/raster.h"
 
 namespace carousel::recon {
 
@@ -30,31 +31,11 @@ cv::Mat RasterizeSilhouette(const Mesh& mesh, const CameraModel& camera) {
       t[k++] = *pixels[v.idx()];
     }
     if (!visible || k != 3) continue;
-    double area = (t[1] - t[0]).x() * (t[2] - t[0]).y() - (t[1] - t[0]).y() * (t[2] - t[0]).x();
+    const double area =
+        (t[1] - t[0]).x() * (t[2] - t[0]).y() - (t[1] - t[0]).y() * (t[2] - t[0]).x();
     if (std::abs(area) < 1e-12) continue;
-    if (area < 0.0) std::swap(t[1], t[2]);
-    const double min_x = std::min({t[0].x(), t[1].x(), t[2].x()});
-    const double max_x = std::max({t[0].x(), t[1].x(), t[2].x()});
-    const double min_y = std::min({t[0].y(), t[1].y(), t[2].y()});
-    const double max_y = std::max({t[0].y(), t[1].y(), t[2].y()});
-    const int x0 = std::max(0, static_cast<int>(std::ceil(min_x)));
-    const int x1 = std::min(camera.width - 1, static_cast<int>(std::floor(max_x)));
-    const int y0 = std::max(0, static_cast<int>(std::ceil(min_y)));
-    const int y1 = std::min(camera.height - 1, static_cast<int>(std::floor(max_y)));
-    // Edge function of edge (a, b) at p: >= 0 on the triangle's side (counter-clockwise in
-    // image coordinates after the swap above).
-    auto edge = [](const Eigen::Vector2d& a, const Eigen::Vector2d& b, double x, double y) {
-      return (b.x() - a.x()) * (y - a.y()) - (b.y() - a.y()) * (x - a.x());
-    };
-    for (int y = y0; y <= y1; ++y) {
-      auto* row = silhouette.ptr<std::uint8_t>(y);
-      for (int x = x0; x <= x1; ++x) {
-        if (row[x]) continue;
-        if (edge(t[0], t[1], x, y) >= 0.0 && edge(t[1], t[2], x, y) >= 0.0 &&
-            edge(t[2], t[0], x, y) >= 0.0)
-          row[x] = 255;
-      }
-    }
+    ForEachPixelCentreIn(t, camera.width, camera.height,
+                         [&](int x, int y) { silhouette.at<std::uint8_t>(y, x) = 255; });
   }
   return silhouette;
 }

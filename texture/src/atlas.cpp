@@ -8,7 +8,9 @@
 #include <opencv2/imgproc.hpp>
 
 #include "carousel/core/error.h"
+#include "carousel/core/raster.h"
 #include "carousel/core/timer.h"
+#include "face_graph.h"
 
 namespace carousel::texture {
 namespace {
@@ -24,33 +26,6 @@ double AngleAt(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::
   const Eigen::Vector3d u = b - a;
   const Eigen::Vector3d w = c - a;
   return std::atan2(u.cross(w).norm(), u.dot(w));
-}
-
-// Calls visit(x, y) for every texel whose centre lies in the triangle (texel coordinates, y
-// down).
-template <typename Visit>
-void RasterizeTexels(Corners2 t, int size, Visit&& visit) {
-  if (SignedArea(t) < 0.0) std::swap(t[1], t[2]);
-  const double min_x = std::min({t[0].x(), t[1].x(), t[2].x()});
-  const double max_x = std::max({t[0].x(), t[1].x(), t[2].x()});
-  const double min_y = std::min({t[0].y(), t[1].y(), t[2].y()});
-  const double max_y = std::max({t[0].y(), t[1].y(), t[2].y()});
-  const int x0 = std::max(0, static_cast<int>(std::ceil(min_x - 0.5)));
-  const int x1 = std::min(size - 1, static_cast<int>(std::floor(max_x - 0.5)));
-  const int y0 = std::max(0, static_cast<int>(std::ceil(min_y - 0.5)));
-  const int y1 = std::min(size - 1, static_cast<int>(std::floor(max_y - 0.5)));
-  auto edge = [](const Eigen::Vector2d& a, const Eigen::Vector2d& b, double x, double y) {
-    return (b.x() - a.x()) * (y - a.y()) - (b.y() - a.y()) * (x - a.x());
-  };
-  for (int y = y0; y <= y1; ++y)
-    for (int x = x0; x <= x1; ++x) {
-      const double cx = x + 0.5;
-      const double cy = y + 0.5;
-      const double e0 = edge(t[0], t[1], cx, cy);
-      const double e1 = edge(t[1], t[2], cx, cy);
-      const double e2 = edge(t[2], t[0], cx, cy);
-      if (e0 >= 0.0 && e1 >= 0.0 && e2 >= 0.0) visit(x, y);
-    }
 }
 
 // The face's UVs and positions, corner k at the halfedge pointing to vertex k.
@@ -110,14 +85,7 @@ AtlasQuality MeasureAtlas(const Mesh& mesh, int atlas_size, int gutter_texels) {
     area_3d += a_3d;
     area_uv += a_uv;
     face_area_3d[f.idx()] = a_3d;
-    // Sander et al.: the partial derivatives of the surface position along s and t.
-    const double s1 = t[0].x(), s2 = t[1].x(), s3 = t[2].x();
-    const double t1 = t[0].y(), t2 = t[1].y(), t3 = t[2].y();
-    const Eigen::Vector3d ss =
-        (p[0] * (t2 - t3) + p[1] * (t3 - t1) + p[2] * (t1 - t2)) / (2 * a_uv);
-    const Eigen::Vector3d st =
-        (p[0] * (s3 - s2) + p[1] * (s1 - s3) + p[2] * (s2 - s1)) / (2 * a_uv);
-    const double l2_sq = 0.5 * (ss.squaredNorm() + st.squaredNorm());
+    const double l2_sq = internal::L2StretchSquared(p[0], p[1], p[2], t[0], t[1], t[2], a_uv);
     face_stretch_sq[f.idx()] = l2_sq;
     stretch_sq += l2_sq * a_3d;
     const Eigen::Vector3d t3d[3] = {Eigen::Vector3d(t[0].x(), t[0].y(), 0),
@@ -150,8 +118,10 @@ AtlasQuality MeasureAtlas(const Mesh& mesh, int atlas_size, int gutter_texels) {
     Corners2 t;
     Corners3 p;
     FaceCorners(mesh, f, &t, &p);
-    for (auto& c : t) c = Eigen::Vector2d(c.x() * atlas_size, (1.0 - c.y()) * atlas_size);
-    RasterizeTexels(t, atlas_size, [&](int x, int y) {
+    // Texel (x, y) (y down) has its centre at (x + 0.5, y + 0.5).
+    for (auto& c : t)
+      c = Eigen::Vector2d(c.x() * atlas_size - 0.5, (1.0 - c.y()) * atlas_size - 0.5);
+    ForEachPixelCentreIn(t, atlas_size, atlas_size, [&](int x, int y) {
       int& o = owner.at<int>(y, x);
       if (o >= 0 && o != chart) ++q.overlapping_texels;
       o = chart;

@@ -36,4 +36,17 @@ struct FaceGraph {
 // \pre a valid OpenMesh triangle mesh (manifold by construction); faces indexed as in the mesh.
 FaceGraph BuildFaceGraph(const Mesh& mesh);
 
+// Squared L2 stretch (Sander, Snyder, Gortler, Hoppe 2001) of the map from a UV triangle q
+// (signed area a_uv > 0) to its surface triangle p: the mean squared length of the surface
+// position's derivatives along u and v.
+inline double L2StretchSquared(const Eigen::Vector3d& p1, const Eigen::Vector3d& p2,
+                               const Eigen::Vector3d& p3, const Eigen::Vector2d& q1,
+                               const Eigen::Vector2d& q2, const Eigen::Vector2d& q3, double a_uv) {
+  const Eigen::Vector3d ss =
+      (p1 * (q2.y() - q3.y()) + p2 * (q3.y() - q1.y()) + p3 * (q1.y() - q2.y())) / (2 * a_uv);
+  const Eigen::Vector3d st =
+      (p1 * (q3.x() - q2.x()) + p2 * (q1.x() - q3.x()) + p3 * (q2.x() - q1.x())) / (2 * a_uv);
+  return 0.5 * (ss.squaredNorm() + st.squaredNorm());
+}
+
 }  // namespace carousel::texture::internal

@@ -385,17 +385,9 @@ double ChartStretch(const FaceGraph& g, const Chart& chart,
     const double a_3d = g.areas[chart.faces[i]];
     if (!(a_uv > 0.0) || !(a_3d > 0.0)) continue;
     const auto& t = g.faces[chart.faces[i]];
-    const Eigen::Vector3d& p1 = g.positions[t[0]];
-    const Eigen::Vector3d& p2 = g.positions[t[1]];
-    const Eigen::Vector3d& p3 = g.positions[t[2]];
-    const Eigen::Vector2d& q1 = uv[c[0]];
-    const Eigen::Vector2d& q2 = uv[c[1]];
-    const Eigen::Vector2d& q3 = uv[c[2]];
-    const Eigen::Vector3d ss =
-        (p1 * (q2.y() - q3.y()) + p2 * (q3.y() - q1.y()) + p3 * (q1.y() - q2.y())) / (2 * a_uv);
-    const Eigen::Vector3d st =
-        (p1 * (q3.x() - q2.x()) + p2 * (q1.x() - q3.x()) + p3 * (q2.x() - q1.x())) / (2 * a_uv);
-    sum += 0.5 * (ss.squaredNorm() + st.squaredNorm()) * a_3d;
+    sum += internal::L2StretchSquared(g.positions[t[0]], g.positions[t[1]], g.positions[t[2]],
+                                      uv[c[0]], uv[c[1]], uv[c[2]], a_uv) *
+           a_3d;
     area += a_3d;
   }
   return area > 0.0 ? std::sqrt(sum / area) : 1.0;
