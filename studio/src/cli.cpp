@@ -24,6 +24,7 @@
 #include "carousel/studio/self_check.h"
 #include "carousel/studio/sim_capture.h"
 #include "carousel/studio/terminal_progress.h"
+#include "carousel/studio/turntable_command.h"
 #include "carousel/texture/atlas.h"
 
 namespace carousel::studio {
@@ -42,8 +43,6 @@ constexpr PlannedCommand kPlannedCommands[] = {
     {"run", "the one-button session: capture, reconstruct, texture, export",
      "issue 9 (studio pipeline)"},
     {"camera", "list, configure and fire cameras (libgphoto2)", "issue 8 (cameras)"},
-    {"turntable", "identify, home, move and configure the turntable controller",
-     "issue 7 (turntable)"},
     {"calibrate", "camera intrinsics and rig calibration", "issue 10 (calibration)"},
 };
 
@@ -410,6 +409,45 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
                    "turntable plate radius to remove from the silhouettes (0 = none)")
       ->capture_default_str();
 
+  // carousel turntable
+  TurntableArgs turntable;
+  CLI::App* turntable_command = app.add_subcommand(
+      "turntable", "identify, home, move, trigger and configure the turntable controller");
+  turntable_command->add_option("--port", turntable.port, "serial port, e.g. /dev/ttyACM0")
+      ->required();
+  turntable_command
+      ->add_option("action", turntable.action, "identify, home, goto, status, trigger or config")
+      ->required();
+  turntable_command->add_option("degrees", turntable.degrees, "goto: absolute table angle");
+  turntable_command->add_option("--timeout", turntable.timeout_s, "home/goto timeout, seconds")
+      ->capture_default_str();
+  turntable_command->add_option("--cameras", turntable.cameras, "trigger: cameras 0..3")
+      ->delimiter(',')
+      ->capture_default_str();
+  turntable_command->add_flag("--focus", turntable.focus, "trigger: focus instead of shutter");
+  turntable_command->add_option("--ms", turntable.duration_ms, "trigger: pulse length, ms")
+      ->capture_default_str();
+  turntable_command->add_option("--steps-per-rev", turntable.steps_per_rev, "config: motor steps");
+  turntable_command->add_option("--microsteps", turntable.microsteps, "config: microstepping");
+  turntable_command->add_option("--gear", turntable.gear,
+                                "config: NUM:DEN, table revs = motor revs x DEN / NUM");
+  turntable_command->add_option("--max-speed", turntable.max_speed, "config: microsteps/s");
+  turntable_command->add_option("--acceleration", turntable.acceleration, "config: microsteps/s^2");
+  turntable_command->add_option("--homing-speed", turntable.homing_speed, "config: microsteps/s");
+  turntable_command->add_option("--backlash", turntable.backlash, "config: microsteps");
+
+  // carousel sim turntable
+  SimTurntableArgs sim_turntable;
+  CLI::App* sim_turntable_command = sim_command->add_subcommand(
+      "turntable", "the turntable firmware in simavr, its serial port on a PTY");
+  sim_turntable_command->add_option("--firmware", sim_turntable.firmware, "firmware ELF");
+  sim_turntable_command->add_option("--link", sim_turntable.link, "symlink to the PTY");
+  sim_turntable_command->add_option("--time-scale", sim_turntable.time_scale, "simulated s per s")
+      ->capture_default_str();
+  sim_turntable_command
+      ->add_option("--seconds", sim_turntable.seconds, "run time, 0 = until Ctrl-C")
+      ->capture_default_str();
+
   // carousel texture atlas (the session texturing of issue 6 comes later)
   AtlasArgs atlas;
   CLI::App* texture_command =
@@ -466,6 +504,8 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
     if (import_command->parsed()) return RunImport(import_args, out, err);
     if (reconstruct_command->parsed()) return RunReconstruct(reconstruct, out, err);
     if (atlas_command->parsed()) return RunTextureAtlas(atlas, out, err);
+    if (turntable_command->parsed()) return RunTurntable(turntable, out, err);
+    if (sim_turntable_command->parsed()) return RunSimTurntable(sim_turntable, out, err);
     if (texture_command->parsed()) {
       err << "carousel texture: not built yet for sessions (see issue 6, texture transfer); "
              "`carousel texture atlas MESH --out OUT.obj` is\n";

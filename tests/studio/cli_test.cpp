@@ -1,6 +1,8 @@
 #include "carousel/studio/cli.h"
 #include "carousel/core/mesh_io.h"
+#include "carousel/sim/avr_turntable.h"
 #include "carousel/studio/session.h"
+#include "carousel/studio/turntable_command.h"
 
 #include <sys/wait.h>
 
@@ -34,10 +36,10 @@ CliResult RunCarousel(std::vector<const char*> args) {
   return {code, out.str(), err.str()};
 }
 
-const char* const kSubcommands[] = {"sim", "import", "reconstruct", "texture",  "process",
-                                    "run", "camera", "turntable",   "calibrate"};
+constexpr const char* kSubcommands[] = {"sim", "import", "reconstruct", "texture",  "process",
+                                        "run", "camera", "turntable",   "calibrate"};
 // Those still to come (the others are built).
-const char* const kUnbuilt[] = {"texture", "process", "run", "camera", "turntable", "calibrate"};
+constexpr const char* kUnbuilt[] = {"texture", "process", "run", "camera", "calibrate"};
 
 TEST(CliTest, HelpListsEverySubcommand) {
   const CliResult result = RunCarousel({"--help"});
@@ -235,6 +237,45 @@ TEST(CliBinaryTest, ReconstructASimulatedSession) {
   EXPECT_NE(corrupt.code, 0);
   EXPECT_THAT(corrupt.out, HasSubstr("cam0_stop05.jpg"));
   EXPECT_EQ(RunBinary("reconstruct " + (dir / "missing").string()).code, kExitIoError);
+}
+
+}  // namespace
+}  // namespace carousel::studio
+
+namespace carousel::studio {
+namespace {
+
+// `carousel turntable` against the real firmware in simavr.
+TEST(CliTest, TurntableCommandsDriveTheController) {
+  testing::TempDir dir;
+  sim::AvrTurntableOptions o;
+  o.firmware = DefaultFirmwarePath();
+  o.time_scale = 20.0;
+  o.link = dir.path() / "ttyTT";
+  sim::AvrTurntable controller(o);
+  const std::string port = controller.port();
+  CliResult r = RunCarousel({"turntable", "--port", port.c_str(), "identify"});
+  ASSERT_EQ(r.code, kExitOk) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("Carousel TT-328, firmware 1.0.0 (protocol 1.0)"));
+  r = RunCarousel({"turntable", "--port", port.c_str(), "goto", "90"});
+  ASSERT_EQ(r.code, kExitOk) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("angle 90.000 deg (2400 microsteps)"));
+  EXPECT_EQ(controller.motor_steps(), 2400);
+  r = RunCarousel({"turntable", "--port", port.c_str(), "config", "--backlash", "64"});
+  ASSERT_EQ(r.code, kExitOk) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("backlash 64 microsteps"));
+  r = RunCarousel({"turntable", "--port", port.c_str(), "config", "--acceleration", "5"});
+  EXPECT_EQ(r.code, kExitUsage);
+  r = RunCarousel(
+      {"turntable", "--port", port.c_str(), "trigger", "--cameras", "0,2", "--ms", "20"});
+  ASSERT_EQ(r.code, kExitOk) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("shutter outputs 5 on for 20 ms"));
+  r = RunCarousel({"turntable", "--port", port.c_str(), "spin"});
+  EXPECT_EQ(r.code, kExitUsage);
+  const std::string missing = (dir.path() / "ttyNONE").string();
+  r = RunCarousel({"turntable", "--port", missing.c_str(), "status"});
+  EXPECT_EQ(r.code, kExitDeviceError);
+  EXPECT_THAT(r.err, HasSubstr(missing));
 }
 
 }  // namespace
