@@ -1,5 +1,6 @@
 #include "carousel/rig/serial_turntable.h"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <numbers>
@@ -29,6 +30,7 @@ void SerialTurntableOptions::Validate() const {
   check(reply_timeout_ms > 0, "reply_timeout_ms", "> 0");
   check(max_retries >= 0 && max_retries <= 50, "max_retries", "in [0, 50]");
   check(poll_interval_ms > 0, "poll_interval_ms", "> 0");
+  check(connect_timeout_ms >= reply_timeout_ms, "connect_timeout_ms", ">= reply_timeout_ms");
 }
 
 SerialTurntable::SerialTurntable(const SerialTurntableOptions& options) : options_(options) {
@@ -47,7 +49,9 @@ void SerialTurntable::Handshake() {
   hello.payload[0] = CP_VERSION_MAJOR;
   hello.payload[1] = CP_VERSION_MINOR;
   hello.len = 2;
-  const cp_frame reply = ExchangeLocked(hello);
+  const cp_frame reply = ExchangeLocked(
+      hello,
+      std::max(1 + options_.max_retries, options_.connect_timeout_ms / options_.reply_timeout_ms));
   if (reply.len < 2 || reply.payload[0] != CP_VERSION_MAJOR)
     throw ProtocolError(options_.port + ": controller speaks protocol " +
                         std::to_string(reply.len >= 1 ? reply.payload[0] : 0) + ".x, host " +
@@ -80,7 +84,8 @@ cp_frame SerialTurntable::Exchange(const cp_frame& command) {
   }
 }
 
-cp_frame SerialTurntable::ExchangeLocked(const cp_frame& original) {
+cp_frame SerialTurntable::ExchangeLocked(const cp_frame& original, int attempts) {
+  if (attempts <= 0) attempts = 1 + options_.max_retries;
   cp_frame command = original;
   command.seq = next_seq_;
   next_seq_ = next_seq_ == 255 ? 1 : static_cast<std::uint8_t>(next_seq_ + 1);
@@ -90,7 +95,7 @@ cp_frame SerialTurntable::ExchangeLocked(const cp_frame& original) {
   CAROUSEL_CHECK(size > 0, "encoding a " << cp_type_name(command.type) << " frame");
   ++counters_.commands;
   const auto write_timeout = std::chrono::milliseconds(options_.reply_timeout_ms + 100);
-  for (int attempt = 0; attempt <= options_.max_retries; ++attempt) {
+  for (int attempt = 0; attempt < attempts; ++attempt) {
     if (attempt > 0) ++counters_.retransmissions;
     port_->Write(std::span(wire.data(), static_cast<std::size_t>(size) + 1), write_timeout);
     const auto deadline = Clock::now() + std::chrono::milliseconds(options_.reply_timeout_ms);
@@ -130,9 +135,8 @@ cp_frame SerialTurntable::ExchangeLocked(const cp_frame& original) {
   }
   ++counters_.failed;
   throw DeviceError(options_.port, std::string("no reply to ") + cp_type_name(command.type) +
-                                       " after " + std::to_string(options_.max_retries + 1) +
-                                       " attempts of " + std::to_string(options_.reply_timeout_ms) +
-                                       " ms");
+                                       " after " + std::to_string(attempts) + " attempts of " +
+                                       std::to_string(options_.reply_timeout_ms) + " ms");
 }
 
 TurntableInfo SerialTurntable::Identify() {

@@ -428,6 +428,36 @@ void AvrTurntable::Replug() {
   if (!state_->plugged) state_->OpenPty();
 }
 
+void AvrTurntable::Reset(std::uint8_t mcusr) {
+  std::lock_guard lock(state_->mutex);
+  State& s = *state_;
+  avr_reset(s.avr);
+  constexpr int kMcusrAddress = 0x54;  // MCUSR, I/O 0x34
+  s.avr->data[kMcusrAddress] = mcusr;
+  // Every pin is an input again: /ENABLE reads high through its pull-up. The port IRQs only
+  // report changes, so their remembered values restart at the registers' reset value too.
+  s.port_b = s.ddr_b = s.port_c = s.port_d = s.ddr_d = 0;
+  for (const char port : {'B', 'C', 'D'})
+    for (const int irq : {IOPORT_IRQ_REG_PORT, IOPORT_IRQ_DIRECTION_ALL})
+      avr_io_getirq(s.avr, AVR_IOCTL_IOPORT_GETIRQ(port), irq)->value = 0;
+  s.UpdateEnable();
+  for (auto& p : s.pulses)
+    if (p.end_cycle == 0) p.end_cycle = s.avr->cycle;
+  s.to_avr.clear();
+  s.xoff = true;
+  // The sensor's level is the board's, not the MCU's.
+  s.home_irq->value = s.sensor ? 1u : 0u;
+  s.UpdateSensor();
+}
+
+std::uint8_t AvrTurntable::ReadData(std::uint16_t address) const {
+  std::lock_guard lock(state_->mutex);
+  if (address > state_->avr->ramend)
+    throw InvalidArgument("AvrTurntable::ReadData: address " + std::to_string(address) +
+                          " beyond the data space");
+  return state_->avr->data[address];
+}
+
 void AvrTurntable::SetLineFaults(const LineFaults& faults) {
   std::lock_guard lock(state_->mutex);
   state_->faults = faults;

@@ -33,6 +33,9 @@ struct SerialTurntableOptions {
   int reply_timeout_ms = 100;
   // Retransmissions before a command is reported failed (0..50).
   int max_retries = 8;
+  // How long the handshake keeps trying after the port opens, ms (>= reply_timeout_ms):
+  // opening the port resets many Arduino boards (DTR), and their bootloader runs first.
+  int connect_timeout_ms = 3000;
   // Status polling period while waiting for a move, ms (> 0).
   int poll_interval_ms = 10;
   void Validate() const;
@@ -84,7 +87,8 @@ class SerialTurntable : public Turntable {
  private:
   // Sends `command` and returns its ACK; NAKs become DeviceError / ProtocolError.
   cp_frame Exchange(const cp_frame& command);
-  cp_frame ExchangeLocked(const cp_frame& command);
+  // `attempts` = 0: 1 + max_retries.
+  cp_frame ExchangeLocked(const cp_frame& command, int attempts = 0);
   void Handshake();
   void HandleEvent(const cp_frame& frame);
 

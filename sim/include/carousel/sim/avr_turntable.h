@@ -90,6 +90,13 @@ class AvrTurntable {
   void Unplug();
   void Replug();
 
+  // Resets the MCU as `mcusr` says (MCUSR bits: 1 power-on, 2 external, e.g. DTR on an
+  // Arduino, 8 watchdog). RAM and registers restart; flash and EEPROM keep their content;
+  // bytes in flight are lost. The motor and the sensor stay where they are.
+  void Reset(std::uint8_t mcusr);
+  // A byte of the MCU's data space (registers, I/O, RAM), e.g. WDTCSR at 0x60.
+  std::uint8_t ReadData(std::uint16_t address) const;
+
   void SetLineFaults(const LineFaults& faults);
   LineCounters line_counters() const;
 
