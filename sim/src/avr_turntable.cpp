@@ -255,8 +255,10 @@ struct AvrTurntable::State {
           if (sleep_cycles > options.frequency_hz / 2000) break;  // 0.5 ms asleep
         }
         ServiceLine();
-        // Pace only an idle line: bytes in flight are delivered at simulated speed.
-        slept = sleep_cycles > 0 && to_avr.empty() && to_host.empty();
+        // Pace only an idle line: bytes due are delivered at simulated speed (a delayed byte
+        // is not due yet, and its delay is simulated time like the rest).
+        slept = sleep_cycles > 0 && to_host.empty() &&
+                (to_avr.empty() || to_avr.front().first > avr->cycle);
         sleep_cycles = 0;
       }
       if (slept) {

@@ -495,7 +495,7 @@ TEST_F(TurntableHil, CorruptedAndLossyLineNeverMovesWrongOrTwice) {
   rig::SerialTurntableOptions t;
   t.port = sim_->port();
   t.reply_timeout_ms = 10;
-  t.max_retries = 12;
+  t.max_retries = 3;  // few enough that some commands are reported failed
   table_ = std::make_unique<rig::SerialTurntable>(t);
   sim::LineFaults faults;
   faults.corrupt_probability = 0.01;
@@ -560,9 +560,26 @@ TEST_F(TurntableHil, CorruptedAndLossyLineNeverMovesWrongOrTwice) {
   EXPECT_GT(line.corrupted, 600u);
   EXPECT_GT(line.dropped, 600u);
   EXPECT_GT(c.retransmissions, 200u);
+  EXPECT_GT(failed, 20);  // the failure path was exercised, moves included
   EXPECT_GT(moves, 200);
   EXPECT_GT(acknowledged, 2000);
   EXPECT_EQ(table_->RawStatus().position, sim_->motor_steps());
+}
+
+TEST_F(TurntableHil, SlowLineCausesRetransmissionsButEveryMoveHappensOnce) {
+  // Commands arrive 2.5 s (simulated; 125 ms of wall time at this time scale) late: longer
+  // than the host's 100 ms reply timeout, so commands are sent again and replies replayed.
+  sim::LineFaults faults;
+  faults.delay_cycles = static_cast<std::uint64_t>(2.5 * sim_->frequency_hz());
+  sim_->SetLineFaults(faults);
+  for (int i = 0; i < 5; ++i) {
+    table_->StartMoveBySteps(300);
+    table_->WaitUntilStopped(kMoveTimeout);
+  }
+  EXPECT_GT(table_->counters().retransmissions, 5u);
+  EXPECT_GT(table_->counters().stale_replies, 0u);
+  EXPECT_EQ(table_->RawStatus().position, 1500);
+  EXPECT_EQ(sim_->motor_steps(), 1500);
 }
 
 TEST_F(TurntableHil, UnplugMidMoveIsADeviceErrorAndReconnectReportsTheTruePosition) {
