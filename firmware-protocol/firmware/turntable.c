@@ -337,6 +337,15 @@ static uint32_t search_span(void) {
   return cp_steps_per_table_rev(&config) + cp_steps_per_table_rev(&config) / 4u;
 }
 
+/* Homing ended without finding the sensor (or its edge). */
+static void home_failed(void) {
+  fault = CP_FAULT_HOME_NOT_FOUND;
+  final_target = position;
+  phase = IDLE;
+  if (!hold) driver_enable(0);
+  send_event(CP_EVENT_FAULT, 0);
+}
+
 /* The main loop's part of the motion: what follows a finished segment. */
 static void advance_motion(void) {
   uint8_t done;
@@ -360,11 +369,7 @@ static void advance_motion(void) {
       break;
     case HOME_SEEK:
       if (!sensor_active()) {
-        fault = CP_FAULT_HOME_NOT_FOUND;
-        final_target = position;
-        phase = IDLE;
-        if (!hold) driver_enable(0);
-        send_event(CP_EVENT_FAULT, 0);
+        home_failed();
         break;
       }
       phase = HOME_RELEASE;
@@ -374,11 +379,7 @@ static void advance_motion(void) {
       break;
     case HOME_RELEASE:
       if (!edge_found) {
-        fault = CP_FAULT_HOME_NOT_FOUND;
-        final_target = position;
-        phase = IDLE;
-        if (!hold) driver_enable(0);
-        send_event(CP_EVENT_FAULT, 0);
+        home_failed();
         break;
       }
       ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { position -= edge_position; }

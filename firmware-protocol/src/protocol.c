@@ -3,6 +3,16 @@
 
 #include <string.h>
 
+int cp_make_frame(cp_frame* frame, uint8_t type, uint8_t seq, const uint8_t* payload, size_t size) {
+  if (frame == NULL || size > CP_MAX_PAYLOAD || (payload == NULL && size > 0))
+    return CP_ERR_ARGUMENT;
+  frame->type = type;
+  frame->seq = seq;
+  frame->len = (uint8_t)size;
+  if (size > 0) memcpy(frame->payload, payload, size);
+  return CP_OK;
+}
+
 uint16_t cp_crc16_update(uint16_t crc, uint8_t byte) {
   int bit;
   crc ^= (uint16_t)((uint16_t)byte << 8);

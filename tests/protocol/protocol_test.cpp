@@ -23,10 +23,7 @@ Bytes Encode(const cp_frame& f) {
 
 cp_frame Frame(std::uint8_t type, std::uint8_t seq, const Bytes& payload) {
   cp_frame f{};
-  f.type = type;
-  f.seq = seq;
-  f.len = static_cast<std::uint8_t>(payload.size());
-  std::copy(payload.begin(), payload.end(), f.payload);
+  EXPECT_EQ(cp_make_frame(&f, type, seq, payload.data(), payload.size()), CP_OK);
   return f;
 }
 
@@ -104,6 +101,16 @@ TEST(ProtocolFrames, RoundTripEveryLengthAndZeroPattern) {
     ASSERT_EQ(frames[0].len, f.len);
     EXPECT_TRUE(std::equal(payload.begin(), payload.end(), frames[0].payload));
   }
+}
+
+TEST(ProtocolFrames, MakeFrameChecksItsArguments) {
+  cp_frame f{};
+  const std::uint8_t big[CP_MAX_PAYLOAD + 1] = {};
+  EXPECT_EQ(cp_make_frame(&f, CP_STATUS, 1, big, sizeof big), CP_ERR_ARGUMENT);
+  EXPECT_EQ(cp_make_frame(&f, CP_STATUS, 1, nullptr, 2), CP_ERR_ARGUMENT);
+  EXPECT_EQ(cp_make_frame(nullptr, CP_STATUS, 1, big, 1), CP_ERR_ARGUMENT);
+  ASSERT_EQ(cp_make_frame(&f, CP_STATUS, 1, nullptr, 0), CP_OK);
+  EXPECT_EQ(f.len, 0);
 }
 
 TEST(ProtocolFrames, EncodeRejectsOversizedPayloadAndSmallBuffer) {

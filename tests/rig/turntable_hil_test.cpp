@@ -432,10 +432,7 @@ class RawLink {
 
 cp_frame Frame(std::uint8_t type, std::uint8_t seq, std::initializer_list<std::uint8_t> payload) {
   cp_frame f{};
-  f.type = type;
-  f.seq = seq;
-  f.len = static_cast<std::uint8_t>(payload.size());
-  std::copy(payload.begin(), payload.end(), f.payload);
+  cp_make_frame(&f, type, seq, std::data(payload), payload.size());
   return f;
 }
 

@@ -123,6 +123,10 @@ typedef struct {
 } cp_trigger;
 #define CP_TRIGGER_SIZE 4
 
+/* Fills `frame` with a type, sequence number and a copy of `size` payload bytes (`payload`
+ * may be NULL when `size` is 0). CP_ERR_ARGUMENT for a null frame or size > CP_MAX_PAYLOAD. */
+int cp_make_frame(cp_frame* frame, uint8_t type, uint8_t seq, const uint8_t* payload, size_t size);
+
 /* CRC-16/CCITT-FALSE. */
 uint16_t cp_crc16(const uint8_t* data, size_t size);
 uint16_t cp_crc16_update(uint16_t crc, uint8_t byte);
