@@ -24,6 +24,7 @@
 #include "carousel/studio/self_check.h"
 #include "carousel/studio/sim_capture.h"
 #include "carousel/studio/terminal_progress.h"
+#include "carousel/studio/texture_session.h"
 #include "carousel/studio/turntable_command.h"
 #include "carousel/texture/atlas.h"
 
@@ -39,7 +40,6 @@ struct PlannedCommand {
 };
 
 constexpr PlannedCommand kPlannedCommands[] = {
-    {"process", "run every processing stage of one or more sessions", "issue 9 (studio pipeline)"},
     {"run", "the one-button session: capture, reconstruct, texture, export",
      "issue 9 (studio pipeline)"},
     {"camera", "list, configure and fire cameras (libgphoto2)", "issue 8 (cameras)"},
@@ -210,6 +210,54 @@ int RunReconstruct(ReconstructArgs& args, std::ostream& out, std::ostream& err) 
         << worst->view << " " << worst->mean_deviation_px << " px (IoU " << std::setprecision(4)
         << worst->iou << ")\n";
   }
+  return kExitOk;
+}
+
+struct TextureArgs {
+  TextureSessionOptions options;
+  std::filesystem::path session;
+  std::string packing = "obb";
+  bool no_blend = false, no_correction = false, no_gain = false;
+};
+
+void PrepareTexture(TextureArgs& args) {
+  args.options.atlas.packing.mode = texture::ParsePackingMode(args.packing);
+  args.options.transfer.blend = !args.no_blend;
+  args.options.grouping.correction = !args.no_correction;
+  args.options.transfer.gain = !args.no_gain;
+}
+
+void PrintTexture(const std::filesystem::path& session, const TextureSessionResult& r,
+                  std::ostream& out) {
+  out << std::fixed << std::setprecision(2) << "model " << r.files.obj.string() << ", "
+      << r.files.glb.string() << ": " << r.faces << " faces, " << r.charts << " charts, " << r.size
+      << "^2 texture from " << r.views << " views\n"
+      << "grouping: " << r.grouping.corrected_faces << " faces moved off the background, "
+      << r.grouping.uncorrectable_faces << " with background in every view, "
+      << r.grouping.island_faces_switched << " island faces switched, " << r.grouping.unseen_faces
+      << " seen by no view (filled from neighbours)\n"
+      << "texel density: " << std::setprecision(1) << 100.0 * r.dense_fraction
+      << " % of faces get at least one texel per photo pixel; " << r.blended_texels
+      << " texels blended across seams\n"
+      << std::setprecision(2) << "time: grouping " << r.seconds_grouping << " s, atlas "
+      << r.seconds_atlas << " s, transfer " << r.seconds_transfer << " s, export "
+      << r.seconds_export << " s (PNG " << r.files.seconds_png << " s, GLB " << r.files.seconds_glb
+      << " s), total " << r.seconds_total << " s; report "
+      << (session / "model" / "report.json").string() << "\n";
+  for (const HeldOutScore& h : r.held_out)
+    out << "held-out view " << h.view << ": PSNR " << h.psnr_db << " dB, SSIM "
+        << std::setprecision(4) << h.ssim << ", silhouette IoU " << h.mask_agreement
+        << std::setprecision(2) << "\n";
+  if (!r.held_out.empty())
+    out << "held-out mean: PSNR " << r.mean_psnr_db << " dB, SSIM " << std::setprecision(4)
+        << r.mean_ssim << "\n";
+}
+
+int RunTexture(TextureArgs& args, std::ostream& out, std::ostream& err) {
+  PrepareTexture(args);
+  CliProgress cli(err);
+  const TextureSessionResult result = TextureSession(args.session, args.options, cli.progress);
+  PrintTexture(args.session, result, out);
   return kExitOk;
 }
 
@@ -448,12 +496,34 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
       ->add_option("--seconds", sim_turntable.seconds, "run time, 0 = until Ctrl-C")
       ->capture_default_str();
 
-  // carousel texture atlas (the session texturing of issue 6 comes later)
+  // carousel texture SESSION | carousel texture atlas MESH
+  TextureArgs texture_args;
   AtlasArgs atlas;
   CLI::App* texture_command =
       app.add_subcommand("texture", "texture atlas and texture map of a session's mesh");
   texture_command->require_subcommand(0, 1);
-  texture_command->allow_extras();
+  texture_command->add_option("session", texture_args.session,
+                              "session folder (with recon/mesh.ply)");
+  texture_command
+      ->add_option("--size", texture_args.options.size, "texture side in texels, 0 = automatic")
+      ->capture_default_str();
+  texture_command->add_option("--max-size", texture_args.options.max_size, "largest automatic size")
+      ->capture_default_str();
+  texture_command
+      ->add_option("--exclude-views", texture_args.options.grouping.exclude_views,
+                   "views not to texture from (held out), e.g. 3,11")
+      ->delimiter(',');
+  texture_command->add_flag("--no-blend", texture_args.no_blend, "no seam blending");
+  texture_command->add_flag("--no-correction", texture_args.no_correction, "no mask correction");
+  texture_command->add_flag("--no-gain", texture_args.no_gain, "no per-view colour gains");
+  texture_command->add_option("--packing", texture_args.packing, "obb or aabb")
+      ->capture_default_str();
+
+  // carousel process SESSION...: reconstruct + texture
+  std::vector<std::filesystem::path> process_sessions;
+  CLI::App* process_command = app.add_subcommand(
+      "process", "every processing stage (reconstruct, texture) of one or more sessions");
+  process_command->add_option("sessions", process_sessions, "session folders")->required();
   CLI::App* atlas_command = texture_command->add_subcommand(
       "atlas", "charts, flattening and packing of a mesh: an OBJ with UVs");
   atlas_command->add_option("mesh", atlas.mesh, "mesh file (OBJ, PLY, OFF)")->required();
@@ -507,9 +577,24 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
     if (turntable_command->parsed()) return RunTurntable(turntable, out, err);
     if (sim_turntable_command->parsed()) return RunSimTurntable(sim_turntable, out, err);
     if (texture_command->parsed()) {
-      err << "carousel texture: not built yet for sessions (see issue 6, texture transfer); "
-             "`carousel texture atlas MESH --out OUT.obj` is\n";
-      return kExitUnavailable;
+      if (texture_args.session.empty()) {
+        err << "carousel texture: a session folder (or `atlas MESH --out OUT.obj`) is required\n";
+        return kExitUsage;
+      }
+      return RunTexture(texture_args, out, err);
+    }
+    if (process_command->parsed()) {
+      PrepareTexture(texture_args);
+      reconstruct.options.silhouettes.method = recon::ParseSilhouetteMethod(reconstruct.method);
+      for (const auto& session : process_sessions) {
+        out << "session " << session.string() << "\n";
+        ReconstructArgs r = reconstruct;
+        r.session = session;
+        RunReconstruct(r, out, err);
+        CliProgress cli(err);
+        PrintTexture(session, TextureSession(session, texture_args.options, cli.progress), out);
+      }
+      return kExitOk;
     }
     err << "carousel: no subcommand\n";
     return kExitUsage;
