@@ -49,10 +49,11 @@ cv::Mat PlotHistogram(const std::vector<int>& edges, const std::vector<int>& cou
 
 // Mean SSIM (Gaussian 11x11, sigma 1.5, the usual constants) of two BGR images over `mask`.
 double MaskedSsim(const cv::Mat& a, const cv::Mat& b, const cv::Mat& mask) {
-  constexpr double kC1 = 6.5025, kC2 = 58.5225;  // (0.01 * 255)^2, (0.03 * 255)^2
+  const cv::Scalar c1 = cv::Scalar::all(6.5025),
+                   c2 = cv::Scalar::all(58.5225);  // (0.01, 0.03 x 255)^2
   cv::Mat fa, fb;
-  a.convertTo(fa, CV_64F);
-  b.convertTo(fb, CV_64F);
+  a.convertTo(fa, CV_32F);
+  b.convertTo(fb, CV_32F);
   auto blur = [](const cv::Mat& m) {
     cv::Mat out;
     cv::GaussianBlur(m, out, cv::Size(11, 11), 1.5);
@@ -62,10 +63,13 @@ double MaskedSsim(const cv::Mat& a, const cv::Mat& b, const cv::Mat& mask) {
   const cv::Mat mu_aa = mu_a.mul(mu_a), mu_bb = mu_b.mul(mu_b), mu_ab = mu_a.mul(mu_b);
   const cv::Mat s_aa = blur(fa.mul(fa)) - mu_aa, s_bb = blur(fb.mul(fb)) - mu_bb,
                 s_ab = blur(fa.mul(fb)) - mu_ab;
-  cv::Mat num = (2 * mu_ab + kC1).mul(2 * s_ab + kC2);
-  cv::Mat den = (mu_aa + mu_bb + kC1).mul(s_aa + s_bb + kC2);
+  cv::Mat t1, t2, t3, t4;
+  cv::add(2 * mu_ab, c1, t1);
+  cv::add(2 * s_ab, c2, t2);
+  cv::add(mu_aa + mu_bb, c1, t3);
+  cv::add(s_aa + s_bb, c2, t4);
   cv::Mat map;
-  cv::divide(num, den, map);
+  cv::divide(t1.mul(t2), t3.mul(t4), map);
   const cv::Scalar mean = cv::mean(map, mask);
   return (mean[0] + mean[1] + mean[2]) / 3.0;
 }

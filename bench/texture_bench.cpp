@@ -1,0 +1,136 @@
+// The texture stage on the simulated rig, timed: a capture session (16 x 5184x3456 by default)
+// is rendered and reconstructed once into a work folder, then textured at the requested sizes
+// with the time of every phase printed (the target: 4,500 faces, 16 photos of
+// 5184x3456 -> an 8192^2 texture plus OBJ/PNG/GLB in <= 10 s on 2 cores, PNG encoding
+// included). Held-out views (--exclude) are scored against their photos. A timed command-line
+// run that prints its figures.
+//
+//   texture_bench [--scene shoe|bottle|...] [--width W] [--height H] [--stops N]
+//                 [--sizes 8192,0] [--exclude 3,11] [--work DIR] [--no-blend]
+//                 [--no-correction] [--no-gain]
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "carousel/core/progress.h"
+#include "carousel/core/timer.h"
+#include "carousel/studio/reconstruct.h"
+#include "carousel/studio/sim_capture.h"
+#include "carousel/studio/texture_session.h"
+
+namespace {
+
+using namespace carousel;  // NOLINT(google-build-using-namespace)
+
+std::vector<int> ParseList(const std::string& text) {
+  std::vector<int> out;
+  std::stringstream in(text);
+  std::string item;
+  while (std::getline(in, item, ',')) out.push_back(std::stoi(item));
+  return out;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string scene = "shoe";
+  int width = 5184, height = 3456, stops = 16;
+  std::vector<int> sizes = {8192, 0}, exclude;
+  std::filesystem::path work = std::filesystem::temp_directory_path() / "carousel_texture_bench";
+  bool blend = true, correction = true, gain = true;
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    auto next = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "%s needs a value\n", arg.c_str());
+        std::exit(64);
+      }
+      return argv[++i];
+    };
+    if (arg == "--scene")
+      scene = next();
+    else if (arg == "--width")
+      width = std::stoi(next());
+    else if (arg == "--height")
+      height = std::stoi(next());
+    else if (arg == "--stops")
+      stops = std::stoi(next());
+    else if (arg == "--sizes")
+      sizes = ParseList(next());
+    else if (arg == "--exclude")
+      exclude = ParseList(next());
+    else if (arg == "--work")
+      work = next();
+    else if (arg == "--no-blend")
+      blend = false;
+    else if (arg == "--no-correction")
+      correction = false;
+    else if (arg == "--no-gain")
+      gain = false;
+    else {
+      std::fprintf(stderr, "unknown argument %s\n", arg.c_str());
+      return 64;
+    }
+  }
+  try {
+    Progress progress;
+    const std::filesystem::path session =
+        work / (scene + "_" + std::to_string(width) + "x" + std::to_string(height) + "_" +
+                std::to_string(stops));
+    if (!std::filesystem::exists(session / "recon" / "mesh.ply")) {
+      std::filesystem::remove_all(session);
+      std::filesystem::create_directories(work);
+      studio::SimCaptureOptions capture;
+      capture.scene = scene;
+      const char* env = std::getenv("CAROUSEL_SHARED_DATA_DIR");
+      capture.data_dir = env != nullptr && *env ? env : CAROUSEL_DEFAULT_SHARED_DATA_DIR;
+      capture.stops = stops;
+      capture.rig.width = width;
+      capture.rig.height = height;
+      Stopwatch watch;
+      studio::SimulateCapture(capture, session, progress);
+      std::printf("capture: %d x %dx%d in %.1f s\n", stops, width, height, watch.ElapsedSeconds());
+      watch = Stopwatch();
+      const studio::ReconstructResult r = studio::ReconstructSession(session, {}, progress);
+      std::printf("reconstruct: %zu faces in %.1f s\n", r.mesh_faces, watch.ElapsedSeconds());
+    }
+    for (const int size : sizes) {
+      studio::TextureSessionOptions options;
+      options.size = size;
+      options.grouping.exclude_views = exclude;
+      options.grouping.correction = correction;
+      options.transfer.blend = blend;
+      options.transfer.gain = gain;
+      const studio::TextureSessionResult t = studio::TextureSession(session, options, progress);
+      std::printf(
+          "texture %s%d^2: %zu faces, %d charts, %d views; grouping %.2f s, atlas %.2f s, transfer "
+          "%.2f s, "
+          "export %.2f s (PNG %.2f s, OBJ %.2f s, GLB %.2f s, %.1f MB); total %.2f s (evaluation "
+          "%.2f s "
+          "apart)\n",
+          size == 0 ? "auto " : "", t.size, t.faces, t.charts, t.views, t.seconds_grouping,
+          t.seconds_atlas, t.seconds_transfer, t.seconds_export, t.files.seconds_png,
+          t.files.seconds_obj, t.files.seconds_glb, static_cast<double>(t.files.glb_bytes) / 1e6,
+          t.seconds_total - t.seconds_evaluation, t.seconds_evaluation);
+      std::printf("  density: %.1f %% of faces >= 1 texel per photo pixel; faces by texels:",
+                  100.0 * t.dense_fraction);
+      for (std::size_t i = 0; i < t.histogram_counts.size(); ++i)
+        std::printf(" [%d..] %d", t.histogram_edges[i], t.histogram_counts[i]);
+      std::printf(
+          "\n  grouping: %d moved off the background, %d unseen (filled); %d texels from other "
+          "views, "
+          "%d inpainted, %d blended\n",
+          t.grouping.corrected_faces, t.grouping.unseen_faces, t.corrected_texels,
+          t.inpainted_texels, t.blended_texels);
+      if (!t.held_out.empty())
+        std::printf("  held out: PSNR %.2f dB, SSIM %.4f\n", t.mean_psnr_db, t.mean_ssim);
+    }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "texture_bench: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
