@@ -11,9 +11,10 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <sstream>
 #include <string>
 #include <vector>
+
+#include <CLI/CLI.hpp>
 
 #include "carousel/core/progress.h"
 #include "carousel/core/timer.h"
@@ -21,60 +22,32 @@
 #include "carousel/studio/sim_capture.h"
 #include "carousel/studio/texture_session.h"
 
-namespace {
-
 using namespace carousel;  // NOLINT(google-build-using-namespace)
 
-std::vector<int> ParseList(const std::string& text) {
-  std::vector<int> out;
-  std::stringstream in(text);
-  std::string item;
-  while (std::getline(in, item, ',')) out.push_back(std::stoi(item));
-  return out;
-}
+namespace {
 
-}  // namespace
-
-int main(int argc, char** argv) {
+int Run(int argc, char** argv) {
   std::string scene = "shoe";
   int width = 5184, height = 3456, stops = 16;
   std::vector<int> sizes = {8192, 0}, exclude;
   std::filesystem::path work = std::filesystem::temp_directory_path() / "carousel_texture_bench";
-  bool blend = true, correction = true, gain = true;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "%s needs a value\n", arg.c_str());
-        std::exit(64);
-      }
-      return argv[++i];
-    };
-    if (arg == "--scene")
-      scene = next();
-    else if (arg == "--width")
-      width = std::stoi(next());
-    else if (arg == "--height")
-      height = std::stoi(next());
-    else if (arg == "--stops")
-      stops = std::stoi(next());
-    else if (arg == "--sizes")
-      sizes = ParseList(next());
-    else if (arg == "--exclude")
-      exclude = ParseList(next());
-    else if (arg == "--work")
-      work = next();
-    else if (arg == "--no-blend")
-      blend = false;
-    else if (arg == "--no-correction")
-      correction = false;
-    else if (arg == "--no-gain")
-      gain = false;
-    else {
-      std::fprintf(stderr, "unknown argument %s\n", arg.c_str());
-      return 64;
-    }
-  }
+  bool no_blend = false, no_correction = false, no_gain = false;
+  CLI::App app{"texture_bench: the texture stage of a simulated session, timed"};
+  app.add_option("--scene", scene, "shoe, bottle, avocado, duck")->capture_default_str();
+  app.add_option("--width", width)->capture_default_str();
+  app.add_option("--height", height)->capture_default_str();
+  app.add_option("--stops", stops)->capture_default_str();
+  app.add_option("--sizes", sizes, "texture sizes, 0 = automatic")
+      ->delimiter(',')
+      ->capture_default_str();
+  app.add_option("--exclude", exclude, "held-out views")->delimiter(',');
+  app.add_option("--work", work, "folder for the session (kept between runs)")
+      ->capture_default_str();
+  app.add_flag("--no-blend", no_blend);
+  app.add_flag("--no-correction", no_correction);
+  app.add_flag("--no-gain", no_gain);
+  CLI11_PARSE(app, argc, argv);
+  const bool blend = !no_blend, correction = !no_correction, gain = !no_gain;
   try {
     Progress progress;
     const std::filesystem::path session =
@@ -133,4 +106,15 @@ int main(int argc, char** argv) {
     return 1;
   }
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return Run(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "texture_bench: %s\n", e.what());
+    return 1;
+  }
 }

@@ -153,6 +153,25 @@ bool Sample(const cv::Mat& image, const Eigen::Vector2d& px, cv::Vec3d* out) {
   return true;
 }
 
+// The mean colour of the 8-neighbours of `q` that `take(x, y)` accepts; false when none does.
+template <typename Take>
+bool NeighbourMean(const cv::Mat& texture, const cv::Point& q, Take&& take, cv::Vec3b* mean) {
+  cv::Vec3d sum(0, 0, 0);
+  int n = 0;
+  for (int dy = -1; dy <= 1; ++dy)
+    for (int dx = -1; dx <= 1; ++dx) {
+      const int x = q.x + dx, y = q.y + dy;
+      if (x < 0 || y < 0 || x >= texture.cols || y >= texture.rows || !take(x, y)) continue;
+      sum += cv::Vec3d(texture.at<cv::Vec3b>(y, x));
+      ++n;
+    }
+  if (n == 0) return false;
+  *mean = cv::Vec3b(cv::saturate_cast<std::uint8_t>(sum[0] / n),
+                    cv::saturate_cast<std::uint8_t>(sum[1] / n),
+                    cv::saturate_cast<std::uint8_t>(sum[2] / n));
+  return true;
+}
+
 double ProjectedArea(const FaceData& f, const CameraModel& camera) {
   std::array<Eigen::Vector2d, 3> px;
   for (int i = 0; i < 3; ++i) {
@@ -602,21 +621,15 @@ TextureMap TransferTexture(const Mesh& mesh, const std::vector<View>& views,
       std::vector<std::pair<cv::Point, cv::Vec3b>> values;
       std::vector<cv::Point> still;
       for (const cv::Point& q : pending) {
-        cv::Vec3d sum(0, 0, 0);
-        int n = 0;
-        for (int dy = -1; dy <= 1; ++dy)
-          for (int dx = -1; dx <= 1; ++dx) {
-            const int xx = q.x + dx, yy = q.y + dy;
-            if (xx < 0 || yy < 0 || xx >= size || yy >= size || hole.at<std::uint8_t>(yy, xx) ||
-                !result.coverage.at<std::uint8_t>(yy, xx))
-              continue;
-            sum += cv::Vec3d(result.texture.at<cv::Vec3b>(yy, xx));
-            ++n;
-          }
-        if (n > 0)
-          values.emplace_back(q, cv::Vec3b(cv::saturate_cast<std::uint8_t>(sum[0] / n),
-                                           cv::saturate_cast<std::uint8_t>(sum[1] / n),
-                                           cv::saturate_cast<std::uint8_t>(sum[2] / n)));
+        cv::Vec3b mean;
+        const bool found = NeighbourMean(
+            result.texture, q,
+            [&](int x, int y) {
+              return !hole.at<std::uint8_t>(y, x) && result.coverage.at<std::uint8_t>(y, x);
+            },
+            &mean);
+        if (found)
+          values.emplace_back(q, mean);
         else
           still.push_back(q);
       }
@@ -707,20 +720,11 @@ TextureMap TransferTexture(const Mesh& mesh, const std::vector<View>& views,
       std::vector<std::pair<cv::Point, cv::Vec3b>> values;
       values.reserve(ring.size());
       for (const cv::Point& q : ring) {
-        cv::Vec3d sum(0, 0, 0);
-        int n = 0;
-        for (int dy = -1; dy <= 1; ++dy)
-          for (int dx = -1; dx <= 1; ++dx) {
-            const int xx = q.x + dx, yy = q.y + dy;
-            if (xx < 0 || yy < 0 || xx >= size || yy >= size || !filled.at<std::uint8_t>(yy, xx))
-              continue;
-            sum += cv::Vec3d(result.texture.at<cv::Vec3b>(yy, xx));
-            ++n;
-          }
-        if (n > 0)
-          values.emplace_back(q, cv::Vec3b(cv::saturate_cast<std::uint8_t>(sum[0] / n),
-                                           cv::saturate_cast<std::uint8_t>(sum[1] / n),
-                                           cv::saturate_cast<std::uint8_t>(sum[2] / n)));
+        cv::Vec3b mean;
+        if (NeighbourMean(
+                result.texture, q, [&](int x, int y) { return filled.at<std::uint8_t>(y, x) != 0; },
+                &mean))
+          values.emplace_back(q, mean);
       }
       std::vector<cv::Point> next;
       for (const auto& [q, colour] : values) {
