@@ -21,6 +21,7 @@
 #include "carousel/core/version.h"
 #include "carousel/studio/import.h"
 #include "carousel/studio/reconstruct.h"
+#include "carousel/studio/run_session.h"
 #include "carousel/studio/self_check.h"
 #include "carousel/studio/sim_capture.h"
 #include "carousel/studio/terminal_progress.h"
@@ -40,8 +41,6 @@ struct PlannedCommand {
 };
 
 constexpr PlannedCommand kPlannedCommands[] = {
-    {"run", "the one-button session: capture, reconstruct, texture, export",
-     "issue 9 (studio pipeline)"},
     {"camera", "list, configure and fire cameras (libgphoto2)", "issue 8 (cameras)"},
     {"calibrate", "camera intrinsics and rig calibration", "issue 10 (calibration)"},
 };
@@ -261,6 +260,40 @@ int RunTexture(TextureArgs& args, std::ostream& out, std::ostream& err) {
   return kExitOk;
 }
 
+struct RunArgs {
+  RunOptions options;
+  bool sim = false;
+  std::filesystem::path resume;
+  std::string size = "5184x3456";
+};
+
+int RunOneButton(RunArgs& args, std::ostream& out, std::ostream& err) {
+  CliProgress cli(err);
+  RunResult result;
+  if (!args.resume.empty()) {
+    result = ResumeSession(args.resume, cli.progress);
+  } else if (args.sim) {
+    ParseSize(args.size, &args.options.sim.rig.width, &args.options.sim.rig.height);
+    CAROUSEL_THROW_IF(args.options.product.empty(), InvalidArgument,
+                      "carousel run: --product SKU is required");
+    result = RunSession(args.options, cli.progress);
+  } else {
+    err << "carousel run: hardware rigs (a rig configuration with the serial turntable and gphoto2 "
+           "cameras) are not built yet (see issue 9); use --sim, or --resume SESSION\n";
+    return kExitUnavailable;
+  }
+  out << "session " << result.session.string() << ": " << result.photos_taken << " photos taken, "
+      << result.photos_kept << " kept from before, " << result.photos_adopted << " adopted, "
+      << result.photos_retaken << " retaken; reconstruct "
+      << (result.reconstructed ? "ran" : "was current") << ", texture "
+      << (result.textured ? "ran" : "was current") << "\n";
+  if (result.textured) PrintTexture(result.session, result.texture, out);
+  const auto model = result.session / "model";
+  out << "model: " << (model / "model.obj").string() << " (+ model.mtl, model.png), "
+      << (model / "model.glb").string() << "\n";
+  return kExitOk;
+}
+
 struct AtlasArgs {
   texture::AtlasOptions options;
   std::filesystem::path mesh;
@@ -457,6 +490,39 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
                    "turntable plate radius to remove from the silhouettes (0 = none)")
       ->capture_default_str();
 
+  // carousel run: the one-button session
+  RunArgs run_args;
+  run_args.options.sim.data_dir = DefaultDataDir();
+  CLI::App* run_command =
+      app.add_subcommand("run", "the one-button session: capture, reconstruct, texture, export");
+  run_command->add_flag("--sim", run_args.sim, "on the simulated rig");
+  run_command->add_option("--resume", run_args.resume, "continue a killed or failed session");
+  run_command->add_option("--product", run_args.options.product,
+                          "product SKU (names the session folder)");
+  run_command->add_option("--out", run_args.options.out, "folder of the sessions")
+      ->capture_default_str();
+  run_command
+      ->add_option("--scene", run_args.options.sim.scene,
+                   "simulated product: shoe, bottle, avocado, duck or a model file")
+      ->capture_default_str();
+  run_command->add_option("--views", run_args.options.sim.stops, "turntable stops per camera")
+      ->capture_default_str();
+  run_command->add_option("--size", run_args.size, "image size WxH")->capture_default_str();
+  run_command
+      ->add_option("--elevations", run_args.options.sim.rig.elevations_deg,
+                   "camera elevations, degrees")
+      ->delimiter(',')
+      ->capture_default_str();
+  run_command
+      ->add_option("--exclude-views", run_args.options.texture.grouping.exclude_views,
+                   "views held out of the texture and scored")
+      ->delimiter(',');
+  run_command->add_option("--data", run_args.options.sim.data_dir,
+                          "shared test data folder (model names)");
+  run_command->add_flag("--force", run_args.options.force,
+                        "start over (the old session is kept beside it)");
+  run_command->get_option("--resume")->excludes("--sim");
+
   // carousel turntable
   TurntableArgs turntable;
   CLI::App* turntable_command = app.add_subcommand(
@@ -575,6 +641,7 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
     if (reconstruct_command->parsed()) return RunReconstruct(reconstruct, out, err);
     if (atlas_command->parsed()) return RunTextureAtlas(atlas, out, err);
     if (turntable_command->parsed()) return RunTurntable(turntable, out, err);
+    if (run_command->parsed()) return RunOneButton(run_args, out, err);
     if (sim_turntable_command->parsed()) return RunSimTurntable(sim_turntable, out, err);
     if (texture_command->parsed()) {
       if (texture_args.session.empty()) {

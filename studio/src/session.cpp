@@ -89,15 +89,17 @@ class Reader {
   // A relative path that stays inside the session folder.
   std::string RelativePath(const json& object, const std::string& key, const std::string& where,
                            bool required = true) const {
-    const std::string text = String(object, key, where, required);
+    std::string text = String(object, key, where, required);
     if (text.empty()) {
       if (required) Fail(where + "." + key + " is empty");
       return text;
     }
+    std::string field = where;
+    field.append(".").append(key);
     const std::filesystem::path path(text);
-    if (path.is_absolute()) Fail(where + "." + key + " is an absolute path: " + text);
+    if (path.is_absolute()) Fail(field.append(" is an absolute path: ").append(text));
     for (const auto& part : path) {
-      if (part == "..") Fail(where + "." + key + " leaves the session folder: " + text);
+      if (part == "..") Fail(field.append(" leaves the session folder: ").append(text));
     }
     return text;
   }
@@ -160,6 +162,7 @@ void WriteSessionManifest(const std::filesystem::path& folder, const Session& se
                   {"table_angle_deg", view.table_angle_deg},
                   {"camera_model", CameraToJson(view.camera_model)}};
     if (!view.mask.empty()) entry["mask"] = view.mask;
+    if (!view.sha256.empty()) entry["sha256"] = view.sha256;
     views.push_back(entry);
   }
   json manifest = {{"format", "carousel-session"},
@@ -213,6 +216,8 @@ Session ReadSession(const std::filesystem::path& folder) {
     SessionView view;
     view.image = read.RelativePath(views[i], "image", where);
     view.mask = read.RelativePath(views[i], "mask", where, false);
+    if (views[i].contains("sha256") && views[i]["sha256"].is_string())
+      view.sha256 = views[i]["sha256"].get<std::string>();
     view.camera = read.Integer(views[i], "camera", where);
     view.stop = read.Integer(views[i], "stop", where);
     view.table_angle_deg = read.Number(views[i], "table_angle_deg", where);

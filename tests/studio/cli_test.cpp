@@ -39,7 +39,7 @@ CliResult RunCarousel(std::vector<const char*> args) {
 constexpr const char* kSubcommands[] = {"sim", "import", "reconstruct", "texture",  "process",
                                         "run", "camera", "turntable",   "calibrate"};
 // Those still to come (the others are built).
-constexpr const char* kUnbuilt[] = {"run", "camera", "calibrate"};
+constexpr const char* kUnbuilt[] = {"camera", "calibrate"};
 
 TEST(CliTest, HelpListsEverySubcommand) {
   const CliResult result = RunCarousel({"--help"});
@@ -118,9 +118,13 @@ TEST(CliBinaryTest, HelpAndUnbuiltCommandFromTheExecutable) {
   const CliResult help = RunBinary("--help");
   EXPECT_EQ(help.code, 0) << help.out;
   for (const char* name : kSubcommands) EXPECT_THAT(help.out, HasSubstr(name));
-  const CliResult run = RunBinary("run --sim");
+  // A hardware rig is not built yet; the simulated one needs a product.
+  const CliResult run = RunBinary("run --product X");
   EXPECT_EQ(run.code, kExitUnavailable) << run.out;
   EXPECT_THAT(run.out, HasSubstr("not built yet"));
+  const CliResult no_product = RunBinary("run --sim");
+  EXPECT_EQ(no_product.code, kExitUsage) << no_product.out;
+  EXPECT_THAT(no_product.out, HasSubstr("--product"));
   // A session that does not exist is named.
   const CliResult texture = RunBinary("texture /nonexistent/session");
   EXPECT_EQ(texture.code, kExitIoError) << texture.out;

@@ -34,6 +34,7 @@ struct SessionView {
   int stop = 0;                  // index of the turntable stop
   double table_angle_deg = 0.0;  // table angle at capture
   CameraModel camera_model;      // exact calibration, cam_from_world at this angle
+  std::string sha256;            // of the photo as downloaded (empty: not recorded)
 };
 
 struct GroundTruth {

@@ -1,0 +1,62 @@
+// `carousel run`: the one-button session. Capture (turntable stops x cameras, through the
+// rig::Turntable and rig::Camera backends), then reconstruct, texture and export, into
+// <out>/<product>/ (DESIGN.md's session folder). Crash-safe and resumable:
+//   - run.json (written first, atomically) records how to rebuild the rig and the plan;
+//   - each photo is downloaded atomically under its planned name (cam<C>_stop<SS>.jpg), then
+//     its SHA-256 goes into session.json, which is rewritten atomically only after the photo
+//     is on disk;
+//   - `carousel run --resume SESSION` keeps every photo whose checksum matches, adopts a
+//     complete photo that was on disk but not yet recorded (a kill between download and
+//     manifest), moves a damaged one aside (damaged/<name>.N, never deleted) and retakes it,
+//     removes stale temporary files, and runs each stage whose outputs are not current.
+// Backends: the simulated rig (a product model on the simulated turntable); the serial and
+// gphoto2 backends plug in behind the same factory when their rig configuration exists.
+#pragma once
+
+#include <filesystem>
+#include <string>
+
+#include "carousel/core/progress.h"
+#include "carousel/studio/reconstruct.h"
+#include "carousel/studio/sim_capture.h"
+#include "carousel/studio/texture_session.h"
+
+namespace carousel::studio {
+
+struct RunOptions {
+  std::string product;                     // SKU; the session folder's name is derived from it
+  std::filesystem::path out = "sessions";  // parent folder
+  SimCaptureOptions sim;                   // scene, rig, stops, renderer (the simulated backend)
+  ReconstructOptions reconstruct;
+  TextureSessionOptions texture;
+  bool force = false;  // replace an existing session of that name
+  void Validate() const;
+};
+
+struct RunResult {
+  std::filesystem::path session;
+  int photos_taken = 0;                          // this run
+  int photos_kept = 0;                           // verified from an earlier run
+  int photos_adopted = 0;                        // complete on disk but not yet recorded
+  int photos_retaken = 0;                        // damaged or missing: moved aside and taken again
+  bool reconstructed = false, textured = false;  // stages run (not skipped) this time
+  TextureSessionResult texture;
+  double seconds_capture = 0.0, seconds_reconstruct = 0.0, seconds_texture = 0.0;
+};
+
+// A session folder name for a product SKU: letters, digits, '-', '_' and '.' kept, anything
+// else '_', no leading dot, at most 100 characters. \throw InvalidArgument if nothing is left.
+std::string SessionNameForProduct(const std::string& product);
+
+// A new session. \throw IoError when it exists (without force), InvalidArgument, and what the
+// stages throw.
+RunResult RunSession(const RunOptions& options, Progress& progress);
+
+// Continues a session started by RunSession. \throw IoError/FormatError naming run.json or
+// session.json, and what the stages throw.
+RunResult ResumeSession(const std::filesystem::path& session, Progress& progress);
+
+// SHA-256 of a file, lowercase hex. \throw IoError.
+std::string FileSha256(const std::filesystem::path& path);
+
+}  // namespace carousel::studio

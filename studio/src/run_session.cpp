@@ -1,0 +1,351 @@
+#include "carousel/studio/run_session.h"
+
+#include <openssl/evp.h>
+
+#include <array>
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <memory>
+#include <numbers>
+
+#include <nlohmann/json.hpp>
+
+#include "carousel/core/error.h"
+#include "carousel/core/file_util.h"
+#include "carousel/core/image_io.h"
+#include "carousel/core/logging.h"
+#include "carousel/core/timer.h"
+#include "carousel/sim/scene.h"
+#include "carousel/sim/sim_rig.h"
+#include "carousel/studio/session.h"
+
+namespace carousel::studio {
+namespace {
+
+using json = nlohmann::json;
+
+constexpr const char* kRunFile = "run.json";
+constexpr auto kDeviceTimeout = std::chrono::milliseconds(60000);
+
+std::string PhotoName(int camera, int stop) {
+  const std::string number = std::to_string(stop);
+  return "cam" + std::to_string(camera) + "_stop" + (number.size() < 2 ? "0" : "") + number +
+         ".jpg";
+}
+
+json RunToJson(const RunOptions& o) {
+  const SimCaptureOptions& s = o.sim;
+  return {
+      {"version", 1},
+      {"product", o.product},
+      {"backend", "sim"},
+      {"sim",
+       {{"scene", s.scene},
+        {"data_dir", s.data_dir.string()},
+        {"stops", s.stops},
+        {"elevations_deg", s.rig.elevations_deg},
+        {"width", s.rig.width},
+        {"height", s.rig.height},
+        {"focal_length_mm", s.rig.focal_length_mm},
+        {"distance_m", s.rig.distance_m},
+        {"noise_sigma", s.render.noise_sigma},
+        {"seed", s.render.seed},
+        {"jpeg_quality", s.jpeg_quality},
+        {"target_height_m", s.placement.target_height_m},
+        {"scale", s.placement.scale},
+        {"yaw_rad", s.placement.yaw_rad}}},
+      {"texture", {{"exclude_views", o.texture.grouping.exclude_views}, {"size", o.texture.size}}}};
+}
+
+RunOptions RunFromJson(const std::filesystem::path& path) {
+  RunOptions o;
+  try {
+    std::ifstream in(path);
+    if (!in) throw IoError(path, "cannot be read (not a session started by `carousel run`?)");
+    const json j = json::parse(in);
+    if (j.at("version").get<int>() != 1) throw FormatError(path, "unsupported version");
+    if (j.at("backend").get<std::string>() != "sim")
+      throw FormatError(path, "backend '" + j.at("backend").get<std::string>() +
+                                  "' is not available in this build");
+    o.product = j.at("product").get<std::string>();
+    const json& s = j.at("sim");
+    o.sim.scene = s.at("scene").get<std::string>();
+    o.sim.data_dir = s.at("data_dir").get<std::string>();
+    o.sim.stops = s.at("stops").get<int>();
+    o.sim.rig.elevations_deg = s.at("elevations_deg").get<std::vector<double>>();
+    o.sim.rig.width = s.at("width").get<int>();
+    o.sim.rig.height = s.at("height").get<int>();
+    o.sim.rig.focal_length_mm = s.at("focal_length_mm").get<double>();
+    o.sim.rig.distance_m = s.at("distance_m").get<double>();
+    o.sim.render.noise_sigma = s.at("noise_sigma").get<double>();
+    o.sim.render.seed = s.at("seed").get<std::uint64_t>();
+    o.sim.jpeg_quality = s.at("jpeg_quality").get<int>();
+    o.sim.placement.target_height_m = s.at("target_height_m").get<double>();
+    o.sim.placement.scale = s.at("scale").get<double>();
+    o.sim.placement.yaw_rad = s.at("yaw_rad").get<double>();
+    o.texture.grouping.exclude_views = j.at("texture").at("exclude_views").get<std::vector<int>>();
+    o.texture.size = j.at("texture").at("size").get<int>();
+  } catch (const json::exception& e) {
+    throw FormatError(path, std::string("malformed: ") + e.what());
+  }
+  return o;
+}
+
+// Removes the temporary files atomic writes leave behind when a process is killed.
+void RemoveStaleTemporaries(const std::filesystem::path& folder) {
+  std::error_code ec;
+  for (const char* sub : {"", "images", "masks", "recon", "model"}) {
+    const auto dir = folder / sub;
+    if (!std::filesystem::is_directory(dir, ec)) continue;
+    for (const auto& entry : std::filesystem::directory_iterator(dir, ec)) {
+      const std::string name = entry.path().filename().string();
+      if (name.size() > 1 && name[0] == '.' && name.find(".tmp-") != std::string::npos) {
+        CAROUSEL_LOG_INFO("removing the stale temporary file " << entry.path().string());
+        std::filesystem::remove(entry.path(), ec);
+      }
+    }
+  }
+}
+
+// Moves a damaged photo aside into <session>/damaged/ (never deletes captured data).
+void MoveAside(const std::filesystem::path& file) {
+  const auto folder = file.parent_path().parent_path() / "damaged";
+  std::filesystem::create_directories(folder);
+  for (int n = 1;; ++n) {
+    const auto aside = folder / (file.filename().string() + "." + std::to_string(n));
+    if (!std::filesystem::exists(aside)) {
+      std::filesystem::rename(file, aside);
+      CAROUSEL_LOG_WARN("moved the damaged photo " << file.string() << " aside to " << aside);
+      return;
+    }
+  }
+}
+
+// Whether `file` is a complete photo of `camera`'s size.
+bool IsCompletePhoto(const std::filesystem::path& file, const CameraModel& camera) {
+  try {
+    const cv::Mat image = ReadImage(file);
+    return image.cols == camera.width && image.rows == camera.height;
+  } catch (const Error&) {
+    return false;
+  }
+}
+
+RunResult Continue(const std::filesystem::path& folder, const RunOptions& options,
+                   Progress& progress) {
+  RunResult result;
+  result.session = folder;
+  RemoveStaleTemporaries(folder);
+  Session session = ReadSession(folder);
+
+  // ---- capture -------------------------------------------------------------------------------
+  Stopwatch watch;
+  progress.BeginStage("capture");
+  const SimCaptureOptions& sim = options.sim;
+  auto scene = std::make_shared<sim::Scene>(sim::LoadScene(ResolveScene(sim.scene, sim.data_dir)));
+  sim::PlaceOnTurntable(*scene, sim.placement);
+  const std::vector<CameraModel> rig = sim::MakeSimRig(sim.rig, scene->Bounds());
+  auto turntable = std::make_shared<sim::SimTurntable>(sim::SimTurntableOptions{.time_scale = 0.0});
+  std::vector<std::unique_ptr<rig::Camera>> cameras;
+  for (std::size_t c = 0; c < rig.size(); ++c) {
+    sim::SimCameraOptions camera_options;
+    camera_options.serial = "SIM" + std::to_string(1000 + c);
+    camera_options.jpeg_quality = sim.jpeg_quality;
+    camera_options.render = sim.render;
+    camera_options.render.seed = sim.render.seed * 1000003ULL + c;
+    cameras.push_back(std::make_unique<sim::SimCamera>(scene, rig[c], turntable, camera_options));
+  }
+  std::filesystem::create_directories(folder / "images");
+  // What is recorded and verified.
+  std::map<std::string, SessionView> recorded;
+  std::vector<SessionView> kept;
+  for (const SessionView& view : session.views) {
+    const auto file = folder / view.image;
+    if (!view.sha256.empty() && std::filesystem::is_regular_file(file) &&
+        FileSha256(file) == view.sha256) {
+      recorded[view.image] = view;
+      ++result.photos_kept;
+    } else {
+      if (std::filesystem::exists(file)) MoveAside(file);
+      ++result.photos_retaken;
+    }
+  }
+  session.views.clear();
+  for (const auto& [name, view] : recorded) session.views.push_back(view);
+  const int total = sim.stops * static_cast<int>(rig.size());
+  int done = static_cast<int>(recorded.size());
+  for (int stop = 0; stop < sim.stops; ++stop) {
+    const double angle_deg = 360.0 * stop / sim.stops;
+    const double angle = angle_deg * std::numbers::pi / 180.0;
+    bool moved = false;
+    for (int c = 0; c < static_cast<int>(rig.size()); ++c) {
+      progress.CheckCancelled();
+      const std::string image = "images/" + PhotoName(c, stop);
+      if (recorded.count(image) != 0) continue;
+      SessionView view;
+      view.image = image;
+      view.camera = c;
+      view.stop = stop;
+      view.table_angle_deg = angle_deg;
+      view.camera_model = sim::CameraAtTableAngle(rig[c], angle);
+      const auto file = folder / image;
+      if (std::filesystem::exists(file)) {
+        // On disk but not recorded: a kill between the download and the manifest.
+        if (IsCompletePhoto(file, view.camera_model)) {
+          ++result.photos_adopted;
+        } else {
+          MoveAside(file);
+          ++result.photos_retaken;
+        }
+      }
+      if (!std::filesystem::exists(file)) {
+        if (!moved) {
+          turntable->MoveTo(angle, kDeviceTimeout);
+          moved = true;
+        }
+        const rig::CapturedPhoto photo = cameras[c]->Capture(kDeviceTimeout);
+        cameras[c]->Download(photo, file, /*delete_from_camera=*/true, kDeviceTimeout);
+        ++result.photos_taken;
+      }
+      view.sha256 = FileSha256(file);
+      session.views.push_back(view);
+      // The manifest names the photo only now that it is on disk.
+      WriteSessionManifest(folder, session);
+      progress.Report(static_cast<std::size_t>(++done), static_cast<std::size_t>(total));
+    }
+  }
+  std::sort(session.views.begin(), session.views.end(),
+            [](const SessionView& a, const SessionView& b) {
+              return std::tie(a.stop, a.camera) < std::tie(b.stop, b.camera);
+            });
+  const bool capture_changed =
+      result.photos_taken + result.photos_adopted + result.photos_retaken > 0;
+  if (capture_changed || session.stages["capture"] != "done") {
+    session.stages["capture"] = "done";
+    if (capture_changed) {
+      // New photos make the later stages stale.
+      session.stages.erase("reconstruct");
+      session.stages.erase("texture");
+    }
+    WriteSessionManifest(folder, session);
+  }
+  progress.EndStage();
+  result.seconds_capture = watch.ElapsedSeconds();
+
+  // ---- reconstruct, texture: skipped when current
+  // ------------------------------------------------
+  session = ReadSession(folder);
+  bool masks_present = true;
+  for (const SessionView& view : session.views)
+    masks_present =
+        masks_present && !view.mask.empty() && std::filesystem::exists(folder / view.mask);
+  if (session.stages["reconstruct"] != "done" || !masks_present ||
+      !std::filesystem::exists(folder / "recon" / "mesh.ply")) {
+    watch = Stopwatch();
+    ReconstructSession(folder, options.reconstruct, progress);
+    result.reconstructed = true;
+    result.seconds_reconstruct = watch.ElapsedSeconds();
+    session = ReadSession(folder);
+    session.stages.erase("texture");
+    WriteSessionManifest(folder, session);
+  }
+  if (session.stages["texture"] != "done" ||
+      !std::filesystem::exists(folder / "model" / "model.glb") ||
+      !std::filesystem::exists(folder / "model" / "model.obj")) {
+    watch = Stopwatch();
+    result.texture = TextureSession(folder, options.texture, progress);
+    result.textured = true;
+    result.seconds_texture = watch.ElapsedSeconds();
+  }
+  return result;
+}
+
+}  // namespace
+
+void RunOptions::Validate() const {
+  SessionNameForProduct(product);
+  sim.Validate();
+  reconstruct.Validate();
+  texture.Validate();
+}
+
+std::string SessionNameForProduct(const std::string& product) {
+  std::string name;
+  for (const char ch : product) {
+    const bool keep = (ch >= 'a' && ch <= 'z') || (ch >= 'A' && ch <= 'Z') ||
+                      (ch >= '0' && ch <= '9') || ch == '-' || ch == '_' || ch == '.';
+    name.push_back(keep ? ch : '_');
+    if (name.size() == 100) break;
+  }
+  while (!name.empty() && name.front() == '.') name.erase(name.begin());
+  const bool meaningful = name.find_first_not_of("_.") != std::string::npos;
+  CAROUSEL_THROW_IF(
+      !meaningful, InvalidArgument,
+      "product '" << product << "' leaves no usable session folder name (use letters or digits)");
+  return name;
+}
+
+std::string FileSha256(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw IoError(path, "cannot be read");
+  std::unique_ptr<EVP_MD_CTX, decltype(&EVP_MD_CTX_free)> context(EVP_MD_CTX_new(),
+                                                                  &EVP_MD_CTX_free);
+  if (!context || EVP_DigestInit_ex(context.get(), EVP_sha256(), nullptr) != 1)
+    throw IoError(path, "SHA-256 unavailable");
+  std::array<char, 1 << 16> buffer{};
+  while (in) {
+    in.read(buffer.data(), buffer.size());
+    if (in.gcount() > 0)
+      EVP_DigestUpdate(context.get(), buffer.data(), static_cast<std::size_t>(in.gcount()));
+  }
+  if (in.bad()) throw IoError(path, "read error");
+  std::array<unsigned char, EVP_MAX_MD_SIZE> digest{};
+  unsigned int size = 0;
+  EVP_DigestFinal_ex(context.get(), digest.data(), &size);
+  static constexpr char kHex[] = "0123456789abcdef";
+  std::string hex;
+  for (unsigned int i = 0; i < size; ++i) {
+    hex.push_back(kHex[digest[i] >> 4]);
+    hex.push_back(kHex[digest[i] & 15]);
+  }
+  return hex;
+}
+
+RunResult RunSession(const RunOptions& options, Progress& progress) {
+  options.Validate();
+  const std::filesystem::path folder = options.out / SessionNameForProduct(options.product);
+  std::error_code ec;
+  if (std::filesystem::exists(folder, ec)) {
+    if (!options.force)
+      throw IoError(
+          folder,
+          "a session of that product exists; `carousel run --resume` continues it, --force "
+          "starts over (the old folder is kept beside it)");
+    const std::string stamp = NowUtc();
+    std::string safe;
+    for (const char ch : stamp) safe.push_back(ch == ':' ? '-' : ch);
+    const auto aside = folder.string() + ".old-" + safe;
+    std::filesystem::rename(folder, aside);
+    CAROUSEL_LOG_INFO("kept the previous session as " << aside);
+  }
+  std::filesystem::create_directories(folder / "images");
+  WriteFileAtomic(folder / kRunFile, RunToJson(options).dump(2));
+  Session session;
+  session.product = options.product;
+  session.created_utc = NowUtc();
+  session.source = "sim:" + options.sim.scene;
+  session.frame = "turntable";
+  WriteSessionManifest(folder, session);
+  return Continue(folder, options, progress);
+}
+
+RunResult ResumeSession(const std::filesystem::path& session, Progress& progress) {
+  if (!std::filesystem::is_directory(session)) throw IoError(session, "is not a session folder");
+  RunOptions options = RunFromJson(session / kRunFile);
+  options.out = session.parent_path();
+  options.Validate();
+  return Continue(session, options, progress);
+}
+
+}  // namespace carousel::studio

@@ -1,0 +1,201 @@
+// The one-button session: names, checksums, resume after damage, and SIGKILL at ten moments
+// spread over a whole run (capture, downloads, each stage), each followed by --resume.
+#include "carousel/studio/run_session.h"
+
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <fstream>
+#include <map>
+#include <random>
+#include <set>
+#include <thread>
+
+#include "carousel/core/error.h"
+#include "carousel/core/timer.h"
+#include "carousel/studio/cli.h"
+#include "carousel/studio/session.h"
+#include "carousel/testing/testing.h"
+
+extern char** environ;
+
+namespace carousel::studio {
+namespace {
+
+using testing::TempDir;
+
+TEST(RunSessionTest, ProductNamesBecomeSafeFolderNames) {
+  EXPECT_EQ(SessionNameForProduct("SHOE-42.blue_v2"), "SHOE-42.blue_v2");
+  EXPECT_EQ(SessionNameForProduct("Shoe 42/blue"), "Shoe_42_blue");
+  EXPECT_EQ(SessionNameForProduct("../../etc"), "_.._etc");
+  EXPECT_EQ(SessionNameForProduct("..hidden"), "hidden");
+  EXPECT_EQ(SessionNameForProduct(std::string(300, 'a')).size(), 100u);
+  EXPECT_THROW(SessionNameForProduct("///"), InvalidArgument);
+  EXPECT_THROW(SessionNameForProduct(""), InvalidArgument);
+}
+
+TEST(RunSessionTest, Sha256OfAKnownText) {
+  TempDir dir;
+  {
+    std::ofstream out(dir / "abc");
+    out << "abc";
+  }
+  EXPECT_EQ(FileSha256(dir / "abc"),
+            "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+  EXPECT_THROW(FileSha256(dir / "missing"), IoError);
+}
+
+// The program, as the operator runs it.
+pid_t Spawn(const std::vector<std::string>& args) {
+  std::vector<std::string> all = {(testing::BinDir() / "carousel").string(), "--log-level", "off"};
+  all.insert(all.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  argv.reserve(all.size() + 1);
+  for (auto& a : all) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, 1, "/dev/null", O_WRONLY, 0);
+  posix_spawn_file_actions_addopen(&actions, 2, "/dev/null", O_WRONLY, 0);
+  pid_t pid = -1;
+  EXPECT_EQ(posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ), 0);
+  posix_spawn_file_actions_destroy(&actions);
+  return pid;
+}
+
+int Wait(pid_t pid) {
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -WTERMSIG(status);
+}
+
+std::vector<std::string> RunArgs(const std::filesystem::path& out) {
+  return {"run",
+          "--sim",
+          "--product",
+          "kill-test",
+          "--out",
+          out.string(),
+          "--size",
+          "480x320",
+          "--views",
+          "8",
+          "--data",
+          testing::SharedDataDir().string(),
+          "--exclude-views",
+          "2"};
+}
+
+std::map<std::string, std::string> Recorded(const std::filesystem::path& session) {
+  std::map<std::string, std::string> photos;
+  if (!std::filesystem::exists(session / kManifestName)) return photos;
+  for (const SessionView& v : ReadSession(session).views) photos[v.image] = v.sha256;
+  return photos;
+}
+
+TEST(RunSessionTest, ResumesAfterSigkillAtTenMomentsWithTheSamePhotosAndNoDuplicates) {
+  TempDir dir;
+  // A whole run first: its duration spreads the kills.
+  Stopwatch watch;
+  ASSERT_EQ(Wait(Spawn(RunArgs(dir / "reference"))), 0);
+  const double seconds = watch.ElapsedSeconds();
+  const std::filesystem::path reference = dir / "reference" / "kill-test";
+  ASSERT_EQ(Recorded(reference).size(), 8u);
+
+  std::mt19937 random(20261201);
+  std::uniform_real_distribution<double> jitter(0.0, 1.0);
+  int during_capture = 0, after_capture = 0;
+  for (int k = 0; k < 10; ++k) {
+    const auto out = dir / ("run" + std::to_string(k));
+    const auto session = out / "kill-test";
+    const pid_t pid = Spawn(RunArgs(out));
+    // Stratified: kill k falls in the k-th tenth of a run.
+    std::this_thread::sleep_for(
+        std::chrono::duration<double>((k + jitter(random)) / 10.0 * seconds));
+    kill(pid, SIGKILL);
+    Wait(pid);
+    const std::map<std::string, std::string> before = Recorded(session);
+    const Session at_kill =
+        std::filesystem::exists(session / kManifestName) ? ReadSession(session) : Session();
+    (at_kill.stages.count("capture") != 0 ? after_capture : during_capture) += 1;
+    if (!std::filesystem::exists(session / "run.json")) {
+      // Killed before the session existed: a new run starts it.
+      ASSERT_EQ(Wait(Spawn(RunArgs(out))), 0) << "kill " << k;
+    } else {
+      ASSERT_EQ(Wait(Spawn({"run", "--resume", session.string()})), 0) << "kill " << k;
+    }
+    const Session done = ReadSession(session);
+    EXPECT_EQ(done.stages.at("capture"), "done");
+    EXPECT_EQ(done.stages.at("reconstruct"), "done");
+    EXPECT_EQ(done.stages.at("texture"), "done");
+    // Every planned photo once; none recorded before the kill was retaken.
+    std::set<std::string> names;
+    for (const SessionView& v : done.views) {
+      EXPECT_TRUE(names.insert(v.image).second) << "duplicate " << v.image;
+      EXPECT_EQ(FileSha256(session / v.image), v.sha256) << v.image;
+      const auto it = before.find(v.image);
+      if (it != before.end()) {
+        EXPECT_EQ(it->second, v.sha256) << "kill " << k << ": " << v.image << " retaken";
+      }
+    }
+    EXPECT_EQ(names.size(), 8u);
+    int files = 0;
+    for (const auto& entry : std::filesystem::directory_iterator(session / "images")) {
+      ++files;
+      EXPECT_TRUE(names.count("images/" + entry.path().filename().string())) << entry.path();
+    }
+    EXPECT_EQ(files, 8) << "kill " << k;
+    for (const char* name :
+         {"model/model.obj", "model/model.png", "model/model.glb", "recon/mesh.ply"})
+      EXPECT_TRUE(std::filesystem::exists(session / name)) << "kill " << k << ": " << name;
+    std::printf("kill %d at %.0f %% of a run: %zu photos recorded, stages %s%s\n", k,
+                100.0 * (k + 0.5) / 10.0, before.size(),
+                at_kill.stages.count("capture") ? "capture" : "-",
+                at_kill.stages.count("reconstruct") ? "+reconstruct" : "");
+  }
+  EXPECT_GE(during_capture, 1);
+  EXPECT_GE(after_capture, 3);
+}
+
+TEST(RunSessionTest, ResumeRetakesMissingAndDamagedPhotosAndKeepsTheDamagedCopy) {
+  TempDir dir;
+  ASSERT_EQ(Wait(Spawn(RunArgs(dir.path()))), 0);
+  const auto session = dir.path() / "kill-test";
+  const auto before = Recorded(session);
+  std::filesystem::remove(session / "images" / "cam0_stop03.jpg");
+  {
+    std::ofstream damage(session / "images" / "cam0_stop05.jpg",
+                         std::ios::binary | std::ios::trunc);
+    damage << "not a photo";
+  }
+  Progress progress;
+  const RunResult result = ResumeSession(session, progress);
+  EXPECT_EQ(result.photos_taken, 2);
+  EXPECT_EQ(result.photos_kept, 6);
+  EXPECT_EQ(result.photos_retaken, 2);
+  EXPECT_TRUE(result.reconstructed);
+  EXPECT_TRUE(result.textured);
+  EXPECT_TRUE(std::filesystem::exists(session / "damaged" / "cam0_stop05.jpg.1"));
+  const auto after = Recorded(session);
+  for (const auto& [image, sha] : after)
+    if (image != "images/cam0_stop03.jpg" && image != "images/cam0_stop05.jpg") {
+      EXPECT_EQ(before.at(image), sha);
+    }
+  // Nothing to do the next time.
+  const RunResult again = ResumeSession(session, progress);
+  EXPECT_EQ(again.photos_kept, 8);
+  EXPECT_FALSE(again.reconstructed);
+  EXPECT_FALSE(again.textured);
+  // An existing session is never replaced without --force.
+  EXPECT_EQ(Wait(Spawn(RunArgs(dir.path()))), kExitIoError);
+}
+
+}  // namespace
+}  // namespace carousel::studio
