@@ -10,6 +10,7 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <chrono>
 #include <fstream>
@@ -76,21 +77,17 @@ int Wait(pid_t pid) {
   return WIFEXITED(status) ? WEXITSTATUS(status) : -WTERMSIG(status);
 }
 
-std::vector<std::string> RunArgs(const std::filesystem::path& out) {
-  return {"run",
-          "--sim",
-          "--product",
-          "kill-test",
-          "--out",
-          out.string(),
-          "--size",
-          "480x320",
-          "--views",
-          "8",
-          "--data",
-          testing::SharedDataDir().string(),
-          "--exclude-views",
-          "2"};
+// 8 stops at 480x320 with view 2 held out and scored; or, for the kill test (11 runs, also
+// under the sanitizers), 6 stops at 360x240 and nothing held out.
+std::vector<std::string> RunArgs(const std::filesystem::path& out, bool small = false) {
+  std::vector<std::string> args = {
+      "run",   "--sim",      "--product", "kill-test",
+      "--out", out.string(), "--data",    testing::SharedDataDir().string()};
+  const std::vector<std::string> size =
+      small ? std::vector<std::string>{"--size", "360x240", "--views", "6"}
+            : std::vector<std::string>{"--size", "480x320", "--views", "8", "--exclude-views", "2"};
+  args.insert(args.end(), size.begin(), size.end());
+  return args;
 }
 
 std::map<std::string, std::string> Recorded(const std::filesystem::path& session) {
@@ -104,10 +101,10 @@ TEST(RunSessionTest, ResumesAfterSigkillAtTenMomentsWithTheSamePhotosAndNoDuplic
   TempDir dir;
   // A whole run first: its duration spreads the kills.
   Stopwatch watch;
-  ASSERT_EQ(Wait(Spawn(RunArgs(dir / "reference"))), 0);
+  ASSERT_EQ(Wait(Spawn(RunArgs(dir / "reference", true))), 0);
   const double seconds = watch.ElapsedSeconds();
   const std::filesystem::path reference = dir / "reference" / "kill-test";
-  ASSERT_EQ(Recorded(reference).size(), 8u);
+  ASSERT_EQ(Recorded(reference).size(), 6u);
 
   std::mt19937 random(20261201);
   std::uniform_real_distribution<double> jitter(0.0, 1.0);
@@ -115,7 +112,7 @@ TEST(RunSessionTest, ResumesAfterSigkillAtTenMomentsWithTheSamePhotosAndNoDuplic
   for (int k = 0; k < 10; ++k) {
     const auto out = dir / ("run" + std::to_string(k));
     const auto session = out / "kill-test";
-    const pid_t pid = Spawn(RunArgs(out));
+    const pid_t pid = Spawn(RunArgs(out, true));
     // Stratified: kill k falls in the k-th tenth of a run.
     std::this_thread::sleep_for(
         std::chrono::duration<double>((k + jitter(random)) / 10.0 * seconds));
@@ -127,7 +124,7 @@ TEST(RunSessionTest, ResumesAfterSigkillAtTenMomentsWithTheSamePhotosAndNoDuplic
     (at_kill.stages.count("capture") != 0 ? after_capture : during_capture) += 1;
     if (!std::filesystem::exists(session / "run.json")) {
       // Killed before the session existed: a new run starts it.
-      ASSERT_EQ(Wait(Spawn(RunArgs(out))), 0) << "kill " << k;
+      ASSERT_EQ(Wait(Spawn(RunArgs(out, true))), 0) << "kill " << k;
     } else {
       ASSERT_EQ(Wait(Spawn({"run", "--resume", session.string()})), 0) << "kill " << k;
     }
@@ -145,13 +142,13 @@ TEST(RunSessionTest, ResumesAfterSigkillAtTenMomentsWithTheSamePhotosAndNoDuplic
         EXPECT_EQ(it->second, v.sha256) << "kill " << k << ": " << v.image << " retaken";
       }
     }
-    EXPECT_EQ(names.size(), 8u);
+    EXPECT_EQ(names.size(), 6u);
     int files = 0;
     for (const auto& entry : std::filesystem::directory_iterator(session / "images")) {
       ++files;
       EXPECT_TRUE(names.count("images/" + entry.path().filename().string())) << entry.path();
     }
-    EXPECT_EQ(files, 8) << "kill " << k;
+    EXPECT_EQ(files, 6) << "kill " << k;
     for (const char* name :
          {"model/model.obj", "model/model.png", "model/model.glb", "recon/mesh.ply"})
       EXPECT_TRUE(std::filesystem::exists(session / name)) << "kill " << k << ": " << name;
@@ -168,6 +165,17 @@ TEST(RunSessionTest, ResumeRetakesMissingAndDamagedPhotosAndKeepsTheDamagedCopy)
   TempDir dir;
   ASSERT_EQ(Wait(Spawn(RunArgs(dir.path()))), 0);
   const auto session = dir.path() / "kill-test";
+  // End to end: the held-out view (2) rendered from model.glb against its photo. Bound from
+  // measurement: 20.2 dB and SSIM 0.76 for this shoe at 480x320, 8 stops.
+  {
+    std::ifstream in(session / "model" / "report.json");
+    const auto report = nlohmann::json::parse(in);
+    const double psnr = report.at("held_out").at("mean_psnr_db").get<double>();
+    const double ssim = report.at("held_out").at("mean_ssim").get<double>();
+    std::printf("one-button session, held-out view: PSNR %.2f dB, SSIM %.4f\n", psnr, ssim);
+    EXPECT_GT(psnr, 19.5);
+    EXPECT_GT(ssim, 0.7);
+  }
   const auto before = Recorded(session);
   std::filesystem::remove(session / "images" / "cam0_stop03.jpg");
   {
