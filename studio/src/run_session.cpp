@@ -4,7 +4,6 @@
 
 #include <array>
 #include <chrono>
-#include <cstdio>
 #include <fstream>
 #include <memory>
 #include <numbers>
@@ -27,12 +26,6 @@ using json = nlohmann::json;
 
 constexpr const char* kRunFile = "run.json";
 constexpr auto kDeviceTimeout = std::chrono::milliseconds(60000);
-
-std::string PhotoName(int camera, int stop) {
-  const std::string number = std::to_string(stop);
-  return "cam" + std::to_string(camera) + "_stop" + (number.size() < 2 ? "0" : "") + number +
-         ".jpg";
-}
 
 json RunToJson(const RunOptions& o) {
   const SimCaptureOptions& s = o.sim;
@@ -181,7 +174,7 @@ RunResult Continue(const std::filesystem::path& folder, const RunOptions& option
     bool moved = false;
     for (int c = 0; c < static_cast<int>(rig.size()); ++c) {
       progress.CheckCancelled();
-      const std::string image = "images/" + PhotoName(c, stop);
+      const std::string image = "images/" + ViewStem(c, stop) + ".jpg";
       if (recorded.count(image) != 0) continue;
       SessionView view;
       view.image = image;

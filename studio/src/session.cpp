@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <ctime>
 #include <limits>
 #include <numbers>
@@ -250,6 +251,12 @@ Session ReadSession(const std::filesystem::path& folder) {
     session.ground_truth.depth_unit_m = read.Number(truth, "depth_unit_m", "ground_truth");
   }
   return session;
+}
+
+std::string ViewStem(int camera, int stop) {
+  char text[32];
+  std::snprintf(text, sizeof text, "cam%d_stop%02d", camera, stop);
+  return text;
 }
 
 std::vector<View> SessionViews(const std::filesystem::path& folder, const Session& session) {

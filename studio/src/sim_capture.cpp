@@ -1,7 +1,6 @@
 #include "carousel/studio/sim_capture.h"
 
 #include <cmath>
-#include <cstdio>
 #include <map>
 #include <numbers>
 
@@ -25,12 +24,6 @@ const std::map<std::string, std::string>& SceneNames() {
       {"duck", "models/Duck/glTF/Duck.gltf"},
   };
   return names;
-}
-
-std::string ViewStem(int camera, int stop) {
-  char text[32];
-  std::snprintf(text, sizeof text, "cam%d_stop%02d", camera, stop);
-  return text;
 }
 
 }  // namespace

@@ -66,6 +66,9 @@ void WriteSessionManifest(const std::filesystem::path& folder, const Session& se
 // The session's photos as Views (absolute paths, cameras, angles, masks when present).
 std::vector<View> SessionViews(const std::filesystem::path& folder, const Session& session);
 
+// The file stem of the photo camera `camera` takes at turntable stop `stop`: "cam0_stop03".
+std::string ViewStem(int camera, int stop);
+
 // The current UTC time as ISO 8601 ("2026-11-22T01:44:27Z").
 std::string NowUtc();
 
