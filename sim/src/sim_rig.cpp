@@ -296,27 +296,32 @@ double SimCamera::ExposureGain() const {
   return (iso / 100.0) * (t * 125.0) * (64.0 / (f * f));
 }
 
-rig::CapturedPhoto SimCamera::Capture(std::chrono::milliseconds) {
-  const auto triggered = std::chrono::steady_clock::now();
+std::vector<std::uint8_t> SimCamera::Shoot() {
   const double angle = turntable_->Status().angle_rad;
   RenderOptions render = options_.render;
   render.exposure = std::clamp(ExposureGain(), 1e-3, 999.0);
-  std::string path;
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    render.seed = options_.render.seed ^ (0x51ed27ULL * static_cast<std::uint64_t>(next_photo_));
-    // Like a camera: IMG_0001..IMG_9999 per folder, then the next folder (100SIMCA, 101SIMCA).
-    const int folder = 100 + (next_photo_ - 1) / 9999;
-    const int number = (next_photo_ - 1) % 9999 + 1;
-    path = "/store_00010001/DCIM/" + std::to_string(folder) + "SIMCA/IMG_" +
-           std::to_string(10000 + number).substr(1) + ".JPG";
-    ++next_photo_;
+    render.seed = options_.render.seed ^ (0x51ed27ULL * static_cast<std::uint64_t>(shots_));
+    ++shots_;
   }
   const RenderResult result =
       Render(*scene_, CameraAtTableAngle(cam_from_studio_, angle), angle, render);
   std::vector<std::uint8_t> jpeg;
   cv::imencode(".jpg", result.image, jpeg, {cv::IMWRITE_JPEG_QUALITY, options_.jpeg_quality});
+  return jpeg;
+}
+
+rig::CapturedPhoto SimCamera::Capture(std::chrono::milliseconds) {
+  const auto triggered = std::chrono::steady_clock::now();
+  std::vector<std::uint8_t> jpeg = Shoot();
   std::lock_guard<std::mutex> lock(mutex_);
+  // Like a camera: IMG_0001..IMG_9999 per folder, then the next folder (100SIMCA, 101SIMCA).
+  const int folder = 100 + (next_photo_ - 1) / 9999;
+  const int number = (next_photo_ - 1) % 9999 + 1;
+  const std::string path = "/store_00010001/DCIM/" + std::to_string(folder) + "SIMCA/IMG_" +
+                           std::to_string(10000 + number).substr(1) + ".JPG";
+  ++next_photo_;
   const std::uint64_t size = jpeg.size();
   card_[path] = std::move(jpeg);
   return {path, size, triggered};

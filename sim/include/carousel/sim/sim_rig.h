@@ -108,6 +108,9 @@ class SimCamera : public rig::Camera {
 
   // The exposure gain the current settings give (1 at ISO 100, f/8, 1/125 s).
   double ExposureGain() const;
+  // Renders a photo at the table's current angle with the current settings: JPEG bytes
+  // (what Capture() stores on the card; the PTP/IP emulator serves these).
+  std::vector<std::uint8_t> Shoot();
 
  private:
   std::shared_ptr<const Scene> scene_;
@@ -118,6 +121,7 @@ class SimCamera : public rig::Camera {
   std::map<std::string, std::string> settings_;
   std::map<std::string, std::vector<std::uint8_t>> card_;  // camera path -> JPEG bytes
   int next_photo_ = 1;
+  std::uint64_t shots_ = 1;  // noise seed per shot
 };
 
 }  // namespace carousel::sim
