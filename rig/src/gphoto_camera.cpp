@@ -282,6 +282,7 @@ std::string GPhotoVersion() {
 
 std::vector<DetectedCamera> DetectGPhotoCameras() {
   std::lock_guard<std::mutex> lock(LibraryMutex());
+  KeepFdZeroOccupied();
   CameraList* list = nullptr;
   gp_list_new(&list);
   GPContext* context = gp_context_new();
@@ -307,6 +308,10 @@ class GPhotoCamera::Impl : public std::enable_shared_from_this<GPhotoCamera::Imp
   explicit Impl(GPhotoCameraOptions options) : options_(std::move(options)) {
     options_.Validate();
     device_ = options_.port.empty() ? "camera" : "camera " + options_.port;
+    {
+      std::lock_guard<std::mutex> lock(LibraryMutex());
+      KeepFdZeroOccupied();
+    }
     context_ = gp_context_new();
     worker_ = std::thread([this] { Work(); });
   }

@@ -2,6 +2,7 @@
 // emulator on 127.0.0.1, and the Debian gphoto2 client against the same emulator.
 // Every test runs with a temporary HOME (libgphoto2 keeps ~/.gphoto/settings).
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 
 #include <algorithm>
@@ -309,6 +310,27 @@ TEST_F(GPhotoTest, ThreeCamerasCaptureInParallelWithSmallTriggerSkew) {
   RecordProperty("worst_trigger_skew_ms", std::to_string(worst_skew_ms));
   std::cout << "worst trigger skew over " << kRounds << " rounds: " << worst_skew_ms << " ms\n";
   EXPECT_LT(worst_skew_ms, 250.0);
+}
+
+TEST_F(GPhotoTest, DescriptorZeroStaysGuardedAcrossCameraExits) {
+  // libgphoto2 2.5.30 closes descriptor 0 when a PTP/IP camera exits. In a process without
+  // stdin, descriptor 0 would be the next socket opened: here, the second camera's listener.
+  sim::PtpIpCamera first_emulator(RandomShutter(5000));
+  ::close(0);
+  rig::GPhotoCamera first(Options(first_emulator));  // occupies descriptor 0 with /dev/null
+  sim::PtpIpCamera second_emulator(RandomShutter(5000), {.serial = "EMU2"});
+  rig::GPhotoCamera second(Options(second_emulator));
+  first.Reconnect(10s);  // exits the first session: closes descriptor 0
+  first.Reconnect(10s);
+  const rig::CapturedPhoto photo = second.Capture(5s);
+  second.Download(photo, dir_ / "second.jpg", false, 5s);
+  EXPECT_EQ(ReadFileBytes(dir_ / "second.jpg"), second_emulator.Photos().back().bytes);
+  EXPECT_EQ(second_emulator.Counters().connections, 1);  // its session was never cut
+  EXPECT_EQ(first.Counters().reconnects, 2);
+  // Descriptor 0 stays a harmless /dev/null: never free, never a camera's socket.
+  struct stat st {};
+  ASSERT_EQ(::fstat(0, &st), 0);
+  EXPECT_TRUE(S_ISCHR(st.st_mode));
 }
 
 // ---- the Debian gphoto2 client, a program we did not write ----
