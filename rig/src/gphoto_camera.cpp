@@ -779,13 +779,7 @@ class GPhotoCamera::Impl : public std::enable_shared_from_this<GPhotoCamera::Imp
     WidgetTree tree;
     GetConfig(&tree);
     std::map<std::string, std::string> values;
-    const int n = gp_widget_count_children(tree.root);
-    for (int i = 0; i < n; ++i) {
-      CameraWidget* child = nullptr;
-      if (gp_widget_get_child(tree.root, i, &child) == GP_OK) {
-        CollectWidgets(child, "", &values, choices);
-      }
-    }
+    CollectWidgets(tree.root, "", &values, choices);
     return values;
   }
 

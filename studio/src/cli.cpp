@@ -19,6 +19,7 @@
 #include "carousel/core/progress.h"
 #include "carousel/core/timer.h"
 #include "carousel/core/version.h"
+#include "carousel/studio/camera_command.h"
 #include "carousel/studio/import.h"
 #include "carousel/studio/reconstruct.h"
 #include "carousel/studio/run_session.h"
@@ -41,7 +42,6 @@ struct PlannedCommand {
 };
 
 constexpr PlannedCommand kPlannedCommands[] = {
-    {"camera", "list, configure and fire cameras (libgphoto2)", "issue 8 (cameras)"},
     {"calibrate", "camera intrinsics and rig calibration", "issue 10 (calibration)"},
 };
 
@@ -550,6 +550,61 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
   turntable_command->add_option("--homing-speed", turntable.homing_speed, "config: microsteps/s");
   turntable_command->add_option("--backlash", turntable.backlash, "config: microsteps");
 
+  // carousel camera
+  CameraArgs camera_args;
+  CLI::App* camera_command = app.add_subcommand(
+      "camera", "list, inspect, configure and fire cameras (libgphoto2: USB or ptpip:)");
+  camera_command->add_option("action", camera_args.action, "list, summary, config or capture")
+      ->required();
+  camera_command->add_option("--port", camera_args.port,
+                             "libgphoto2 port: usb:BUS,DEV or ptpip:HOST:PORT:PORT "
+                             "(default: the only camera found)");
+  camera_command->add_option("--model", camera_args.model,
+                             "libgphoto2 model (default: detected; \"PTP/IP Camera\" for ptpip:)");
+  camera_command->add_option("--camera", camera_args.model, "same as --model (gphoto2's name)");
+  camera_command->add_option("--set", camera_args.set,
+                             "config: NAME=VALUE, e.g. iso=400, aperture=f/8 (repeatable)");
+  camera_command->add_option("--out", camera_args.out, "capture: folder for the photos")
+      ->capture_default_str();
+  camera_command->add_option("--count", camera_args.count, "capture: photos to take")
+      ->capture_default_str();
+  camera_command->add_flag("--delete", camera_args.delete_after,
+                           "capture: delete each photo from the camera once saved");
+  camera_command->add_option("--timeout", camera_args.timeout_s, "per operation, seconds")
+      ->capture_default_str();
+
+  // carousel sim camera
+  SimCameraArgs sim_camera;
+  sim_camera.data_dir = DefaultDataDir();
+  CLI::App* sim_camera_command = sim_command->add_subcommand(
+      "camera", "a PTP/IP camera on 127.0.0.1 photographing the simulated rig");
+  sim_camera_command->add_option("--port", sim_camera.port, "TCP port (0: any free)")
+      ->capture_default_str();
+  sim_camera_command
+      ->add_option("--scene", sim_camera.scene, "shoe, bottle, avocado, duck or a file")
+      ->capture_default_str();
+  sim_camera_command->add_option("--data", sim_camera.data_dir, "shared test data folder");
+  sim_camera_command->add_option("--size", sim_camera.size, "photo size WxH")
+      ->capture_default_str();
+  sim_camera_command->add_option("--elevation", sim_camera.elevation_deg, "camera elevation, deg")
+      ->capture_default_str();
+  sim_camera_command->add_option("--serial", sim_camera.serial, "serial number")
+      ->capture_default_str();
+  sim_camera_command
+      ->add_option("--turn-deg", sim_camera.turn_deg, "turn the table this far after every capture")
+      ->capture_default_str();
+  sim_camera_command
+      ->add_option("--capture-delay", sim_camera.capture_delay_ms,
+                   "ms from the trigger to the new-photo event")
+      ->capture_default_str();
+  sim_camera_command->add_option("--busy", sim_camera.busy,
+                                 "fault: the first N captures answer Device Busy");
+  sim_camera_command
+      ->add_option("--events", sim_camera.events, "fault: all, added-only, complete-only or none")
+      ->capture_default_str();
+  sim_camera_command->add_option("--seconds", sim_camera.seconds, "run time, 0 = until Ctrl-C")
+      ->capture_default_str();
+
   // carousel sim turntable
   SimTurntableArgs sim_turntable;
   CLI::App* sim_turntable_command = sim_command->add_subcommand(
@@ -641,6 +696,8 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
     if (reconstruct_command->parsed()) return RunReconstruct(reconstruct, out, err);
     if (atlas_command->parsed()) return RunTextureAtlas(atlas, out, err);
     if (turntable_command->parsed()) return RunTurntable(turntable, out, err);
+    if (camera_command->parsed()) return RunCamera(camera_args, out, err);
+    if (sim_camera_command->parsed()) return RunSimCamera(sim_camera, out, err);
     if (run_command->parsed()) return RunOneButton(run_args, out, err);
     if (sim_turntable_command->parsed()) return RunSimTurntable(sim_turntable, out, err);
     if (texture_command->parsed()) {

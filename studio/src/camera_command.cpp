@@ -1,0 +1,202 @@
+#include "carousel/studio/camera_command.h"
+
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <iomanip>
+#include <numbers>
+#include <thread>
+
+#include "carousel/core/error.h"
+#include "carousel/rig/gphoto_camera.h"
+#include "carousel/rig/usb_devices.h"
+#include "carousel/sim/ptpip_camera.h"
+#include "carousel/sim/scene.h"
+#include "carousel/sim/sim_rig.h"
+#include "carousel/studio/sim_capture.h"
+
+namespace carousel::studio {
+namespace {
+
+volatile std::sig_atomic_t g_stop = 0;
+extern "C" void OnSimCameraStop(int) { g_stop = 1; }
+
+std::chrono::milliseconds Millis(double seconds) {
+  return std::chrono::milliseconds(static_cast<long long>(seconds * 1000));
+}
+
+int List(std::ostream& out) {
+  out << rig::GPhotoVersion() << '\n';
+  const std::vector<rig::DetectedCamera> cameras = rig::DetectGPhotoCameras();
+  out << "cameras (libgphoto2): " << cameras.size() << '\n';
+  for (const rig::DetectedCamera& c : cameras) out << "  " << c.model << " on " << c.port << '\n';
+  try {
+    const std::vector<rig::UsbDevice> devices = rig::ListUsbDevices();
+    out << "USB devices (libusb): " << devices.size() << '\n';
+    for (const rig::UsbDevice& d : devices) {
+      out << "  " << (d.kind == rig::UsbDeviceKind::kCamera ? "camera " : "serial ") << d.ids()
+          << " " << d.vendor << " " << d.description << " on port " << d.port_path;
+      if (d.kind == rig::UsbDeviceKind::kCamera) out << " (" << d.gphoto_port() << ")";
+      out << '\n';
+    }
+  } catch (const DeviceError& e) {
+    out << "USB devices (libusb): " << e.what() << '\n';
+  }
+  out << "network cameras are not detected: name them, e.g. --port "
+         "ptpip:192.168.1.20:15740:15740\n";
+  return 0;
+}
+
+}  // namespace
+
+int RunCamera(const CameraArgs& args, std::ostream& out, std::ostream& err) {
+  if (args.action == "list") return List(out);
+  CAROUSEL_THROW_IF(
+      args.action != "summary" && args.action != "config" && args.action != "capture",
+      InvalidArgument,
+      "unknown camera action '" << args.action << "' (list, summary, config or capture)");
+  CAROUSEL_THROW_IF(args.count < 1, InvalidArgument, "--count must be >= 1");
+  rig::GPhotoCameraOptions options;
+  options.port = args.port;
+  options.model = args.model;
+  options.connect_timeout = Millis(args.timeout_s);
+  rig::GPhotoCamera camera(options);
+  const auto timeout = Millis(args.timeout_s);
+  const rig::CameraInfo info = camera.Identify();
+  if (args.action == "summary") {
+    out << info.manufacturer << " " << info.model << ", serial " << info.serial << ", on "
+        << info.port << " (" << info.driver << ")\n";
+    for (const auto& [name, value] : camera.Settings(timeout)) {
+      out << "  " << name << " = " << value << '\n';
+    }
+    out << camera.Summary(timeout);
+    return 0;
+  }
+  if (args.action == "config") {
+    for (const std::string& assignment : args.set) {
+      const std::size_t eq = assignment.find('=');
+      CAROUSEL_THROW_IF(eq == std::string::npos || eq == 0, InvalidArgument,
+                        "--set wants NAME=VALUE, not '" << assignment << "'");
+      const std::string name = assignment.substr(0, eq);
+      const std::string value = assignment.substr(eq + 1);
+      if (name == rig::kSettingIso || name == rig::kSettingAperture ||
+          name == rig::kSettingShutterSpeed || name == rig::kSettingWhiteBalance ||
+          name == rig::kSettingImageFormat || name == rig::kSettingCaptureTarget) {
+        camera.SetSetting(name, value, timeout);
+      } else {
+        camera.SetConfiguration(name, value, timeout);
+      }
+      out << "set " << name << " = " << value << '\n';
+    }
+    std::map<std::string, std::vector<std::string>> choices;
+    for (const auto& [path, value] : camera.Configuration(timeout, &choices)) {
+      out << path << " = " << value;
+      const auto it = choices.find(path);
+      if (it != choices.end() && !it->second.empty()) {
+        const std::vector<std::string>& c = it->second;
+        out << "  [";
+        if (c.size() <= 12) {
+          for (std::size_t i = 0; i < c.size(); ++i) out << (i ? ", " : "") << c[i];
+        } else {
+          out << c[0] << ", " << c[1] << ", ..., " << c.back() << "; " << c.size() << " values";
+        }
+        out << "]";
+      }
+      out << '\n';
+    }
+    return 0;
+  }
+  // capture
+  std::filesystem::create_directories(args.out);
+  for (int i = 0; i < args.count; ++i) {
+    const auto start = std::chrono::steady_clock::now();
+    const rig::CapturedPhoto photo = camera.Capture(timeout);
+    const auto captured = std::chrono::steady_clock::now();
+    const std::string name = photo.camera_path.substr(photo.camera_path.find_last_of('/') + 1);
+    const std::filesystem::path destination = args.out / name;
+    camera.Download(photo, destination, args.delete_after, timeout);
+    const auto done = std::chrono::steady_clock::now();
+    out << destination.string() << "  " << photo.size_bytes << " bytes, capture "
+        << std::chrono::duration_cast<std::chrono::milliseconds>(captured - start).count()
+        << " ms, download "
+        << std::chrono::duration_cast<std::chrono::milliseconds>(done - captured).count()
+        << " ms\n";
+  }
+  const rig::GPhotoCounters counters = camera.Counters();
+  if (counters.busy_retries || counters.download_retries || counters.reconnects) {
+    err << "camera " << info.serial << ": " << counters.busy_retries << " busy retries, "
+        << counters.download_retries << " download retries, " << counters.reconnects
+        << " reconnects\n";
+  }
+  return 0;
+}
+
+int RunSimCamera(const SimCameraArgs& args, std::ostream& out, std::ostream& /*err*/) {
+  CAROUSEL_THROW_IF(args.port < 0 || args.port > 65535, InvalidArgument, "--port must be 0..65535");
+  sim::PtpIpEvents events = sim::PtpIpEvents::kAll;
+  if (args.events == "added-only") {
+    events = sim::PtpIpEvents::kAddedOnly;
+  } else if (args.events == "complete-only") {
+    events = sim::PtpIpEvents::kCompleteOnly;
+  } else if (args.events == "none") {
+    events = sim::PtpIpEvents::kNone;
+  } else {
+    CAROUSEL_THROW_IF(args.events != "all", InvalidArgument,
+                      "--events must be all, added-only, complete-only or none");
+  }
+  sim::SimRigOptions rig;
+  rig.elevations_deg = {args.elevation_deg};
+  const std::size_t x = args.size.find('x');
+  CAROUSEL_THROW_IF(x == std::string::npos, InvalidArgument, "--size wants WxH");
+  try {
+    rig.width = std::stoi(args.size.substr(0, x));
+    rig.height = std::stoi(args.size.substr(x + 1));
+  } catch (const std::logic_error&) {
+    throw InvalidArgument("--size wants WxH, not '" + args.size + "'");
+  }
+  rig.Validate();
+  auto scene =
+      std::make_shared<sim::Scene>(sim::LoadScene(ResolveScene(args.scene, args.data_dir)));
+  sim::PlaceOnTurntable(*scene, {});
+  auto table = std::make_shared<sim::SimTurntable>(sim::SimTurntableOptions{.time_scale = 0.0});
+  auto sim_camera =
+      std::make_shared<sim::SimCamera>(scene, sim::MakeSimRig(rig, scene->Bounds()).front(), table,
+                                       sim::SimCameraOptions{.serial = args.serial});
+  const double turn_rad = args.turn_deg * std::numbers::pi / 180.0;
+  auto shots = std::make_shared<int>(0);
+  sim::PtpIpCameraOptions options;
+  options.serial = args.serial;
+  options.port = static_cast<std::uint16_t>(args.port);
+  options.capture_delay = std::chrono::milliseconds(args.capture_delay_ms);
+  sim::PtpIpCamera emulator(
+      [sim_camera, table, turn_rad, shots](const std::map<std::string, std::string>& settings) {
+        // Each photo at the next table angle when --turn-deg is set.
+        table->StartMoveTo(turn_rad * (*shots)++);
+        table->WaitUntilStopped(std::chrono::seconds(1));
+        for (const auto& [name, value] : settings) {
+          sim_camera->SetSetting(name, value, std::chrono::milliseconds(0));
+        }
+        return sim_camera->Shoot();
+      },
+      options);
+  emulator.SetBusy(args.busy);
+  emulator.SetEvents(events);
+  out << "PTP/IP camera " << args.serial << " (" << args.scene << ", " << rig.width << "x"
+      << rig.height << ") listening: --port " << emulator.gphoto_port()
+      << " --camera \"PTP/IP Camera\"" << std::endl;
+  g_stop = 0;
+  auto previous_int = std::signal(SIGINT, OnSimCameraStop);
+  auto previous_term = std::signal(SIGTERM, OnSimCameraStop);
+  const auto end = std::chrono::steady_clock::now() + Millis(args.seconds);
+  while (!g_stop && (args.seconds <= 0 || std::chrono::steady_clock::now() < end)) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  std::signal(SIGINT, previous_int);
+  std::signal(SIGTERM, previous_term);
+  const sim::PtpIpCounters c = emulator.Counters();
+  out << "served " << c.captures << " captures, " << c.bytes_served << " bytes in " << c.sessions
+      << " sessions\n";
+  return 0;
+}
+
+}  // namespace carousel::studio
