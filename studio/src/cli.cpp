@@ -263,6 +263,7 @@ int RunTexture(TextureArgs& args, std::ostream& out, std::ostream& err) {
 struct RunArgs {
   RunOptions options;
   bool sim = false;
+  std::filesystem::path rig;  // a rig file: the hardware backends
   std::filesystem::path resume;
   std::string size = "5184x3456";
 };
@@ -277,10 +278,15 @@ int RunOneButton(RunArgs& args, std::ostream& out, std::ostream& err) {
     CAROUSEL_THROW_IF(args.options.product.empty(), InvalidArgument,
                       "carousel run: --product SKU is required");
     result = RunSession(args.options, cli.progress);
+  } else if (!args.rig.empty()) {
+    CAROUSEL_THROW_IF(args.options.product.empty(), InvalidArgument,
+                      "carousel run: --product SKU is required");
+    args.options.hardware = ReadRigConfig(args.rig);
+    result = RunSession(args.options, cli.progress);
   } else {
-    err << "carousel run: hardware rigs (a rig configuration with the serial turntable and gphoto2 "
-           "cameras) are not built yet (see issue 9); use --sim, or --resume SESSION\n";
-    return kExitUnavailable;
+    err << "carousel run: say where to capture: --sim (the simulated rig), --rig RIG.json "
+           "(the studio's turntable and cameras), or --resume SESSION\n";
+    return kExitUsage;
   }
   out << "session " << result.session.string() << ": " << result.photos_taken << " photos taken, "
       << result.photos_kept << " kept from before, " << result.photos_adopted << " adopted, "
@@ -497,6 +503,9 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
       app.add_subcommand("run", "the one-button session: capture, reconstruct, texture, export");
   run_command->add_flag("--sim", run_args.sim, "on the simulated rig");
   run_command->add_option("--resume", run_args.resume, "continue a killed or failed session");
+  run_command->add_option("--rig", run_args.rig,
+                          "rig file (turntable port, cameras, calibration, capture plan): "
+                          "capture with the studio's hardware");
   run_command->add_option("--product", run_args.options.product,
                           "product SKU (names the session folder)");
   run_command->add_option("--out", run_args.options.out, "folder of the sessions")
@@ -522,6 +531,8 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
   run_command->add_flag("--force", run_args.options.force,
                         "start over (the old session is kept beside it)");
   run_command->get_option("--resume")->excludes("--sim");
+  run_command->get_option("--rig")->excludes("--sim");
+  run_command->get_option("--rig")->excludes("--resume");
 
   // carousel turntable
   TurntableArgs turntable;

@@ -5,8 +5,11 @@
 #include <array>
 #include <chrono>
 #include <fstream>
+#include <future>
 #include <memory>
 #include <numbers>
+#include <optional>
+#include <thread>
 
 #include <nlohmann/json.hpp>
 
@@ -29,10 +32,10 @@ constexpr auto kDeviceTimeout = std::chrono::milliseconds(60000);
 
 json RunToJson(const RunOptions& o) {
   const SimCaptureOptions& s = o.sim;
-  return {
+  json run = {
       {"version", 1},
       {"product", o.product},
-      {"backend", "sim"},
+      {"backend", o.hardware ? "hardware" : "sim"},
       {"sim",
        {{"scene", s.scene},
         {"data_dir", s.data_dir.string()},
@@ -49,6 +52,10 @@ json RunToJson(const RunOptions& o) {
         {"scale", s.placement.scale},
         {"yaw_rad", s.placement.yaw_rad}}},
       {"texture", {{"exclude_views", o.texture.grouping.exclude_views}, {"size", o.texture.size}}}};
+  // The rig as it was when the session started: a resume uses the same devices and plan even
+  // if the rig file changed meanwhile.
+  if (o.hardware) run["rig"] = json::parse(RigConfigToJsonText(*o.hardware));
+  return run;
 }
 
 RunOptions RunFromJson(const std::filesystem::path& path) {
@@ -58,9 +65,12 @@ RunOptions RunFromJson(const std::filesystem::path& path) {
     if (!in) throw IoError(path, "cannot be read (not a session started by `carousel run`?)");
     const json j = json::parse(in);
     if (j.at("version").get<int>() != 1) throw FormatError(path, "unsupported version");
-    if (j.at("backend").get<std::string>() != "sim")
-      throw FormatError(path, "backend '" + j.at("backend").get<std::string>() +
-                                  "' is not available in this build");
+    const std::string backend = j.at("backend").get<std::string>();
+    if (backend == "hardware") {
+      o.hardware = RigConfigFromJsonText(j.at("rig").dump(), path);
+    } else if (backend != "sim") {
+      throw FormatError(path, "backend '" + backend + "' is not available in this build");
+    }
     o.product = j.at("product").get<std::string>();
     const json& s = j.at("sim");
     o.sim.scene = s.at("scene").get<std::string>();
@@ -125,7 +135,50 @@ bool IsCompletePhoto(const std::filesystem::path& file, const CameraModel& camer
   }
 }
 
-RunResult Continue(const std::filesystem::path& folder, const RunOptions& options,
+// The simulated rig: the product model on the simulated turntable, one simulated camera per
+// elevation.
+RigBackends OpenSimRig(const SimCaptureOptions& sim) {
+  auto scene = std::make_shared<sim::Scene>(sim::LoadScene(ResolveScene(sim.scene, sim.data_dir)));
+  sim::PlaceOnTurntable(*scene, sim.placement);
+  RigBackends rig;
+  rig.cam_from_table = sim::MakeSimRig(sim.rig, scene->Bounds());
+  auto turntable = std::make_shared<sim::SimTurntable>(sim::SimTurntableOptions{.time_scale = 0.0});
+  for (std::size_t c = 0; c < rig.cam_from_table.size(); ++c) {
+    sim::SimCameraOptions camera_options;
+    camera_options.serial = "SIM" + std::to_string(1000 + c);
+    camera_options.jpeg_quality = sim.jpeg_quality;
+    camera_options.render = sim.render;
+    camera_options.render.seed = sim.render.seed * 1000003ULL + c;
+    rig.cameras.push_back(
+        std::make_unique<sim::SimCamera>(scene, rig.cam_from_table[c], turntable, camera_options));
+  }
+  rig.turntable = turntable;
+  rig.plan.stops = sim.stops;
+  rig.plan.settle_ms = 0;
+  return rig;
+}
+
+RigBackends OpenRig(const RunOptions& options) {
+  return options.hardware ? OpenHardwareRig(*options.hardware) : OpenSimRig(options.sim);
+}
+
+// Waits for every future; returns the results, and rethrows the first error only after all
+// have finished (no camera is left mid-operation).
+template <typename T>
+std::vector<std::optional<T>> JoinAll(std::vector<std::future<T>>& futures,
+                                      std::exception_ptr* error) {
+  std::vector<std::optional<T>> results(futures.size());
+  for (std::size_t i = 0; i < futures.size(); ++i) {
+    try {
+      results[i] = futures[i].get();
+    } catch (...) {
+      if (!*error) *error = std::current_exception();
+    }
+  }
+  return results;
+}
+
+RunResult Continue(const std::filesystem::path& folder, const RunOptions& options, RigBackends& rig,
                    Progress& progress) {
   RunResult result;
   result.session = folder;
@@ -135,24 +188,14 @@ RunResult Continue(const std::filesystem::path& folder, const RunOptions& option
   // ---- capture -------------------------------------------------------------------------------
   Stopwatch watch;
   progress.BeginStage("capture");
-  const SimCaptureOptions& sim = options.sim;
-  auto scene = std::make_shared<sim::Scene>(sim::LoadScene(ResolveScene(sim.scene, sim.data_dir)));
-  sim::PlaceOnTurntable(*scene, sim.placement);
-  const std::vector<CameraModel> rig = sim::MakeSimRig(sim.rig, scene->Bounds());
-  auto turntable = std::make_shared<sim::SimTurntable>(sim::SimTurntableOptions{.time_scale = 0.0});
-  std::vector<std::unique_ptr<rig::Camera>> cameras;
-  for (std::size_t c = 0; c < rig.size(); ++c) {
-    sim::SimCameraOptions camera_options;
-    camera_options.serial = "SIM" + std::to_string(1000 + c);
-    camera_options.jpeg_quality = sim.jpeg_quality;
-    camera_options.render = sim.render;
-    camera_options.render.seed = sim.render.seed * 1000003ULL + c;
-    cameras.push_back(std::make_unique<sim::SimCamera>(scene, rig[c], turntable, camera_options));
-  }
+  const CapturePlan& plan = rig.plan;
+  const auto move_timeout =
+      std::chrono::milliseconds(static_cast<long long>(plan.move_timeout_s * 1000));
+  const auto camera_timeout =
+      std::chrono::milliseconds(static_cast<long long>(plan.camera_timeout_s * 1000));
   std::filesystem::create_directories(folder / "images");
   // What is recorded and verified.
   std::map<std::string, SessionView> recorded;
-  std::vector<SessionView> kept;
   for (const SessionView& view : session.views) {
     const auto file = folder / view.image;
     if (!view.sha256.empty() && std::filesystem::is_regular_file(file) &&
@@ -166,47 +209,94 @@ RunResult Continue(const std::filesystem::path& folder, const RunOptions& option
   }
   session.views.clear();
   for (const auto& [name, view] : recorded) session.views.push_back(view);
-  const int total = sim.stops * static_cast<int>(rig.size());
+  const int cameras = static_cast<int>(rig.cameras.size());
+  const int total = plan.stops * cameras;
   int done = static_cast<int>(recorded.size());
-  for (int stop = 0; stop < sim.stops; ++stop) {
-    const double angle_deg = 360.0 * stop / sim.stops;
-    const double angle = angle_deg * std::numbers::pi / 180.0;
-    bool moved = false;
-    for (int c = 0; c < static_cast<int>(rig.size()); ++c) {
-      progress.CheckCancelled();
+  auto record = [&](SessionView view) {
+    view.sha256 = FileSha256(folder / view.image);
+    session.views.push_back(view);
+    // The manifest names the photo only now that it is on disk.
+    WriteSessionManifest(folder, session);
+    progress.Report(static_cast<std::size_t>(++done), static_cast<std::size_t>(total));
+  };
+  auto angle_of = [&](int stop) { return 2.0 * std::numbers::pi * stop / plan.stops; };
+  bool homed = false;
+  int moving_to = -1;  // the stop the table was last sent to
+  for (int stop = 0; stop < plan.stops; ++stop) {
+    progress.CheckCancelled();
+    const double angle = angle_of(stop);
+    std::vector<SessionView> to_take;
+    for (int c = 0; c < cameras; ++c) {
       const std::string image = "images/" + ViewStem(c, stop) + ".jpg";
       if (recorded.count(image) != 0) continue;
       SessionView view;
       view.image = image;
       view.camera = c;
       view.stop = stop;
-      view.table_angle_deg = angle_deg;
-      view.camera_model = sim::CameraAtTableAngle(rig[c], angle);
+      view.table_angle_deg = 360.0 * stop / plan.stops;
+      view.camera_model = sim::CameraAtTableAngle(rig.cam_from_table[c], angle);
       const auto file = folder / image;
       if (std::filesystem::exists(file)) {
         // On disk but not recorded: a kill between the download and the manifest.
         if (IsCompletePhoto(file, view.camera_model)) {
           ++result.photos_adopted;
-        } else {
-          MoveAside(file);
-          ++result.photos_retaken;
+          record(view);
+          continue;
         }
+        MoveAside(file);
+        ++result.photos_retaken;
       }
-      if (!std::filesystem::exists(file)) {
-        if (!moved) {
-          turntable->MoveTo(angle, kDeviceTimeout);
-          moved = true;
-        }
-        const rig::CapturedPhoto photo = cameras[c]->Capture(kDeviceTimeout);
-        cameras[c]->Download(photo, file, /*delete_from_camera=*/true, kDeviceTimeout);
-        ++result.photos_taken;
-      }
-      view.sha256 = FileSha256(file);
-      session.views.push_back(view);
-      // The manifest names the photo only now that it is on disk.
-      WriteSessionManifest(folder, session);
-      progress.Report(static_cast<std::size_t>(++done), static_cast<std::size_t>(total));
+      to_take.push_back(view);
     }
+    if (to_take.empty()) continue;
+    if (!homed) {
+      rig.turntable->Home(move_timeout);
+      homed = true;
+      moving_to = -1;
+    }
+    if (moving_to != stop) rig.turntable->StartMoveTo(angle);
+    rig.turntable->WaitUntilStopped(move_timeout);
+    if (plan.settle_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(plan.settle_ms));
+    // Every camera of this stop fires at once.
+    std::vector<std::future<rig::CapturedPhoto>> shots;
+    for (const SessionView& view : to_take) {
+      rig::Camera* camera = rig.cameras[view.camera].get();
+      shots.push_back(std::async(std::launch::async, [camera, camera_timeout] {
+        return camera->Capture(camera_timeout);
+      }));
+    }
+    std::exception_ptr error;
+    const std::vector<std::optional<rig::CapturedPhoto>> photos = JoinAll(shots, &error);
+    // The table turns to the next stop while the photos download.
+    if (!error && stop + 1 < plan.stops) {
+      rig.turntable->StartMoveTo(angle_of(stop + 1));
+      moving_to = stop + 1;
+    }
+    std::vector<std::future<int>> downloads;
+    for (std::size_t i = 0; i < to_take.size(); ++i) {
+      if (!photos[i]) continue;
+      rig::Camera* camera = rig.cameras[to_take[i].camera].get();
+      const rig::CapturedPhoto photo = *photos[i];
+      const std::filesystem::path file = folder / to_take[i].image;
+      const bool remove = plan.delete_from_camera;
+      downloads.push_back(
+          std::async(std::launch::async, [camera, photo, file, remove, camera_timeout] {
+            camera->Download(photo, file, remove, camera_timeout);
+            return 0;
+          }));
+    }
+    std::size_t d = 0;
+    for (std::size_t i = 0; i < to_take.size(); ++i) {
+      if (!photos[i]) continue;
+      try {
+        downloads[d++].get();
+        ++result.photos_taken;
+        record(to_take[i]);
+      } catch (...) {
+        if (!error) error = std::current_exception();
+      }
+    }
+    if (error) std::rethrow_exception(error);
   }
   std::sort(session.views.begin(), session.views.end(),
             [](const SessionView& a, const SessionView& b) {
@@ -258,7 +348,11 @@ RunResult Continue(const std::filesystem::path& folder, const RunOptions& option
 
 void RunOptions::Validate() const {
   SessionNameForProduct(product);
-  sim.Validate();
+  if (hardware) {
+    hardware->Validate();
+  } else {
+    sim.Validate();
+  }
   reconstruct.Validate();
   texture.Validate();
 }
@@ -309,6 +403,13 @@ RunResult RunSession(const RunOptions& options, Progress& progress) {
   options.Validate();
   const std::filesystem::path folder = options.out / SessionNameForProduct(options.product);
   std::error_code ec;
+  if (std::filesystem::exists(folder, ec) && !options.force) {
+    throw IoError(folder,
+                  "a session of that product exists; `carousel run --resume` continues it, "
+                  "--force starts over (the old folder is kept beside it)");
+  }
+  // Every device answers before anything is written: a missing camera costs nothing.
+  RigBackends rig = OpenRig(options);
   if (std::filesystem::exists(folder, ec)) {
     if (!options.force)
       throw IoError(
@@ -327,10 +428,10 @@ RunResult RunSession(const RunOptions& options, Progress& progress) {
   Session session;
   session.product = options.product;
   session.created_utc = NowUtc();
-  session.source = "sim:" + options.sim.scene;
+  session.source = options.hardware ? "rig" : "sim:" + options.sim.scene;
   session.frame = "turntable";
   WriteSessionManifest(folder, session);
-  return Continue(folder, options, progress);
+  return Continue(folder, options, rig, progress);
 }
 
 RunResult ResumeSession(const std::filesystem::path& session, Progress& progress) {
@@ -338,7 +439,8 @@ RunResult ResumeSession(const std::filesystem::path& session, Progress& progress
   RunOptions options = RunFromJson(session / kRunFile);
   options.out = session.parent_path();
   options.Validate();
-  return Continue(session, options, progress);
+  RigBackends rig = OpenRig(options);
+  return Continue(session, options, rig, progress);
 }
 
 }  // namespace carousel::studio

@@ -19,7 +19,9 @@ namespace {
 
 using nlohmann::json;
 
-json CameraToJson(const CameraModel& camera) {
+}  // namespace
+
+json CameraModelToJson(const CameraModel& camera) {
   const Rigid3d& pose = camera.cam_from_world;
   json rotation = json::array();
   for (int r = 0; r < 3; ++r) {
@@ -38,6 +40,10 @@ json CameraToJson(const CameraModel& camera) {
            {{"rotation_row_major", rotation},
             {"translation", {pose.translation.x(), pose.translation.y(), pose.translation.z()}}}}};
 }
+
+namespace {
+
+json CameraToJson(const CameraModel& camera) { return CameraModelToJson(camera); }
 
 // Field access that turns every JSON problem into a FormatError naming the field.
 class Reader {
@@ -144,6 +150,11 @@ std::filesystem::path HiddenSibling(const std::filesystem::path& path, const cha
 }
 
 }  // namespace
+
+CameraModel CameraModelFromJson(const json& value, const std::filesystem::path& file,
+                                const std::string& where) {
+  return Reader(file).Camera(value, where);
+}
 
 std::string NowUtc() {
   const std::time_t now = std::time(nullptr);

@@ -127,10 +127,14 @@ TEST(CliBinaryTest, HelpAndUnbuiltCommandFromTheExecutable) {
   const CliResult help = RunBinary("--help");
   EXPECT_EQ(help.code, 0) << help.out;
   for (const char* name : kSubcommands) EXPECT_THAT(help.out, HasSubstr(name));
-  // A hardware rig is not built yet; the simulated one needs a product.
+  // `run` needs to know where to capture; the simulated rig needs a product; a rig file
+  // that is not there is named.
   const CliResult run = RunBinary("run --product X");
-  EXPECT_EQ(run.code, kExitUnavailable) << run.out;
-  EXPECT_THAT(run.out, HasSubstr("not built yet"));
+  EXPECT_EQ(run.code, kExitUsage) << run.out;
+  EXPECT_THAT(run.out, HasSubstr("--rig RIG.json"));
+  const CliResult no_rig = RunBinary("run --product X --rig /nonexistent/rig.json");
+  EXPECT_EQ(no_rig.code, kExitIoError) << no_rig.out;
+  EXPECT_THAT(no_rig.out, HasSubstr("/nonexistent/rig.json"));
   const CliResult no_product = RunBinary("run --sim");
   EXPECT_EQ(no_product.code, kExitUsage) << no_product.out;
   EXPECT_THAT(no_product.out, HasSubstr("--product"));

@@ -9,15 +9,19 @@
 //     complete photo that was on disk but not yet recorded (a kill between download and
 //     manifest), moves a damaged one aside (damaged/<name>.N, never deleted) and retakes it,
 //     removes stale temporary files, and runs each stage whose outputs are not current.
-// Backends: the simulated rig (a product model on the simulated turntable); the serial and
-// gphoto2 backends plug in behind the same factory when their rig configuration exists.
+// Backends: the simulated rig (a product model on the simulated turntable), or the hardware of
+// a rig file (the serial turntable controller and libgphoto2 cameras; rig_config.h). Each stop:
+// move, settle, every camera fires at once, then the table turns to the next stop while the
+// photos download.
 #pragma once
 
 #include <filesystem>
+#include <optional>
 #include <string>
 
 #include "carousel/core/progress.h"
 #include "carousel/studio/reconstruct.h"
+#include "carousel/studio/rig_config.h"
 #include "carousel/studio/sim_capture.h"
 #include "carousel/studio/texture_session.h"
 
@@ -27,6 +31,7 @@ struct RunOptions {
   std::string product;                     // SKU; the session folder's name is derived from it
   std::filesystem::path out = "sessions";  // parent folder
   SimCaptureOptions sim;                   // scene, rig, stops, renderer (the simulated backend)
+  std::optional<RigConfig> hardware;       // set: capture with this rig's devices instead
   ReconstructOptions reconstruct;
   TextureSessionOptions texture;
   bool force = false;  // replace an existing session of that name

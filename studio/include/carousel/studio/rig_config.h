@@ -1,0 +1,85 @@
+// The rig configuration file (rig.json): which turntable controller and cameras a studio has,
+// each camera's calibration (its pose relative to the turntable), the settings the cameras get
+// at the start of a session and the capture plan defaults. `carousel run --rig rig.json` runs
+// the same one-button session as `--sim`, on hardware.
+//
+//   {
+//     "format": "carousel-rig", "version": 1,
+//     "turntable": {"port": "/dev/serial/by-id/usb-Carousel_TT-328-if00",
+//                   "steps_per_rev": 200, "microsteps": 16, "gear": "1:3"},   (gear optional)
+//     "cameras": [{"port": "usb:001,005", "model": "", "serial": "032021001234",
+//                  "settings": {"iso": "100", "aperture": "f/11"},
+//                  "calibration": { camera model: intrinsics, distortion, cam_from_world =
+//                                   cam_from_table at table angle 0, as in session.json }}],
+//     "capture": {"stops": 16, "settle_ms": 300, "delete_from_camera": true,
+//                 "move_timeout_s": 60, "camera_timeout_s": 60},
+//     "backdrop": "white"
+//   }
+#pragma once
+
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "carousel/core/camera_model.h"
+#include "carousel/rig/camera.h"
+#include "carousel/rig/turntable.h"
+
+namespace carousel::studio {
+
+struct RigTurntableConfig {
+  std::string port;  // serial device of the controller
+  // Applied to the controller at the start of a session when set.
+  std::optional<int> steps_per_rev, microsteps, gear_num, gear_den;
+};
+
+struct RigCameraConfig {
+  std::string port;    // libgphoto2 port
+  std::string model;   // libgphoto2 model; empty = detected
+  std::string serial;  // when set, the camera on `port` must have this serial
+  std::map<std::string, std::string> settings;  // applied at the start of a session
+  CameraModel calibration;                      // cam_from_world at table angle 0
+};
+
+struct CapturePlan {
+  int stops = 16;                  // turntable stops per turn (as the paper)
+  int settle_ms = 300;             // wait after a move before firing (vibration)
+  bool delete_from_camera = true;  // once the photo is safely on disk
+  double move_timeout_s = 60.0;
+  double camera_timeout_s = 60.0;
+  void Validate() const;
+};
+
+struct RigConfig {
+  RigTurntableConfig turntable;
+  std::vector<RigCameraConfig> cameras;
+  CapturePlan capture;
+  std::string backdrop = "white";
+  void Validate() const;
+};
+
+// \throw IoError (missing, unreadable) or FormatError naming the file and the field.
+RigConfig ReadRigConfig(const std::filesystem::path& path);
+// Atomic write. \throw IoError.
+void WriteRigConfig(const std::filesystem::path& path, const RigConfig& config);
+// The JSON text of a config (what WriteRigConfig writes), and back (`source` names it in errors).
+std::string RigConfigToJsonText(const RigConfig& config);
+RigConfig RigConfigFromJsonText(const std::string& text, const std::filesystem::path& source);
+
+// The devices a session captures with, whatever their backend.
+struct RigBackends {
+  std::shared_ptr<rig::Turntable> turntable;
+  std::vector<std::unique_ptr<rig::Camera>> cameras;
+  std::vector<CameraModel> cam_from_table;  // per camera: cam_from_world at table angle 0
+  CapturePlan plan;
+};
+
+// Opens the turntable controller (serial) and the cameras (libgphoto2), checks the serial
+// numbers, applies the controller gear and the camera settings. \throw DeviceError naming the
+// device that is missing or wrong, before anything is captured.
+RigBackends OpenHardwareRig(const RigConfig& config);
+
+}  // namespace carousel::studio

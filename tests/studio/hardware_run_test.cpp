@@ -1,0 +1,188 @@
+// The one-button session on the hardware backends, with every device path real except the
+// hardware itself: the turntable firmware runs in simavr behind a PTY (rig::SerialTurntable),
+// and each camera is a PTP/IP camera emulator driven through real libgphoto2
+// (rig::GPhotoCamera). The emulators photograph the simulated studio at the angle the
+// simulated motor has actually turned to.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <iostream>
+#include <map>
+#include <memory>
+#include <numbers>
+
+#include "carousel/core/error.h"
+#include "carousel/core/file_util.h"
+#include "carousel/core/progress.h"
+#include "carousel/sim/avr_turntable.h"
+#include "carousel/sim/ptpip_camera.h"
+#include "carousel/sim/scene.h"
+#include "carousel/sim/sim_rig.h"
+#include "carousel/studio/rig_config.h"
+#include "carousel/studio/run_session.h"
+#include "carousel/studio/session.h"
+#include "carousel/studio/sim_capture.h"
+#include "carousel/studio/turntable_command.h"
+#include "carousel/testing/testing.h"
+
+namespace carousel::studio {
+namespace {
+
+using ::testing::HasSubstr;
+using namespace std::chrono_literals;
+
+constexpr int kStepsPerRev = 9600;  // the firmware's default gear
+
+class HardwareRunTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    ::setenv("HOME", home_.path().c_str(), 1);  // libgphoto2's ~/.gphoto/settings
+    sim::AvrTurntableOptions o;
+    o.firmware = DefaultFirmwarePath();
+    o.time_scale = 20.0;
+    o.link = dir_.path() / "ttyTT";
+    controller_ = std::make_unique<sim::AvrTurntable>(o);
+
+    scene_ = std::make_shared<sim::Scene>(
+        sim::LoadScene(ResolveScene("shoe", testing::SharedDataDir())));
+    sim::PlaceOnTurntable(*scene_, {});
+    sim::SimRigOptions rig;
+    rig.width = 360;
+    rig.height = 240;
+    rig.elevations_deg = {15.0, 45.0};
+    models_ = sim::MakeSimRig(rig, scene_->Bounds());
+    table_ = std::make_shared<sim::SimTurntable>(sim::SimTurntableOptions{.time_scale = 0.0});
+    for (std::size_t c = 0; c < models_.size(); ++c) {
+      auto camera = std::make_shared<sim::SimCamera>(scene_, models_[c], table_);
+      sim::PtpIpCameraOptions options;
+      options.serial = "EMU" + std::to_string(c);
+      emulators_.push_back(std::make_unique<sim::PtpIpCamera>(
+          [this, camera](const std::map<std::string, std::string>& settings) {
+            // The angle the motor has turned to since the first photo (stop 0 = home).
+            const std::int64_t position = controller_->table_position();
+            if (!home_position_) home_position_ = position;
+            const double angle = 2.0 * std::numbers::pi *
+                                 static_cast<double>(position - *home_position_) / kStepsPerRev;
+            table_->StartMoveTo(angle);
+            table_->WaitUntilStopped(1s);
+            for (const auto& [name, value] : settings) camera->SetSetting(name, value, 0ms);
+            return camera->Shoot();
+          },
+          options));
+    }
+  }
+
+  RigConfig Config() const {
+    RigConfig config;
+    config.turntable.port = controller_->port();
+    for (std::size_t c = 0; c < emulators_.size(); ++c) {
+      RigCameraConfig camera;
+      camera.port = emulators_[c]->gphoto_port();
+      camera.serial = "EMU" + std::to_string(c);
+      camera.settings = {{"iso", "200"}};
+      camera.calibration = models_[c];
+      config.cameras.push_back(camera);
+    }
+    config.capture.stops = 16;
+    config.capture.settle_ms = 20;
+    return config;
+  }
+
+  testing::TempDir home_;
+  testing::TempDir dir_;
+  std::unique_ptr<sim::AvrTurntable> controller_;
+  std::shared_ptr<sim::Scene> scene_;
+  std::vector<CameraModel> models_;
+  std::shared_ptr<sim::SimTurntable> table_;
+  std::vector<std::unique_ptr<sim::PtpIpCamera>> emulators_;
+  std::optional<std::int64_t> home_position_;
+};
+
+TEST_F(HardwareRunTest, SixteenStopsThroughTheFirmwareAndLibgphoto2IntoASession) {
+  // The rig file round-trips.
+  WriteRigConfig(dir_ / "rig.json", Config());
+  RunOptions options;
+  options.hardware = ReadRigConfig(dir_ / "rig.json");
+  options.product = "hw-demo";
+  options.out = dir_.path() / "sessions";
+  options.texture.grouping.exclude_views = {3};
+  Progress progress;
+  const RunResult result = RunSession(options, progress);
+
+  EXPECT_EQ(result.photos_taken, 32);
+  const Session session = ReadSession(result.session);
+  ASSERT_EQ(session.views.size(), 32u);
+  // Every photo is the one its camera served, at the planned name, with its checksum.
+  for (std::size_t c = 0; c < emulators_.size(); ++c) {
+    const std::vector<sim::PtpIpPhoto> served = emulators_[c]->Photos();
+    ASSERT_EQ(served.size(), 16u) << c;
+    for (int stop = 0; stop < 16; ++stop) {
+      const auto file = result.session / "images" / (ViewStem(static_cast<int>(c), stop) + ".jpg");
+      EXPECT_EQ(ReadFileBytes(file), served[stop].bytes) << file;
+      EXPECT_TRUE(served[stop].deleted) << "left on the camera: " << file;
+    }
+    // The camera settings of the rig file reached the cameras.
+    EXPECT_EQ(emulators_[c]->PropertyValues().at(0x500F), 200u);
+  }
+  for (const SessionView& v : session.views) {
+    EXPECT_EQ(v.sha256, FileSha256(result.session / v.image));
+    EXPECT_NEAR(v.table_angle_deg, 22.5 * v.stop, 1e-9);
+  }
+  // The motor turned through every stop and came back to rest at the last one.
+  EXPECT_EQ(controller_->table_position() - *home_position_, 15 * kStepsPerRev / 16);
+  // And the pipeline ran to a textured model.
+  EXPECT_TRUE(std::filesystem::exists(result.session / "model" / "model.glb"));
+  EXPECT_TRUE(std::filesystem::exists(result.session / "model" / "model.obj"));
+  ASSERT_EQ(result.texture.held_out.size(), 1u);
+  std::cout << "held-out view 3: PSNR " << result.texture.held_out[0].psnr_db << " dB\n";
+  EXPECT_GT(result.texture.held_out[0].psnr_db, 17.0);
+}
+
+TEST_F(HardwareRunTest, CameraMissingAtStartIsAClearErrorAndWritesNothing) {
+  RigConfig config = Config();
+  config.cameras[1].port = "ptpip:127.0.0.1:1:1";  // nothing listens there
+  RunOptions options;
+  options.hardware = config;
+  options.product = "missing-camera";
+  options.out = dir_.path() / "sessions";
+  Progress progress;
+  try {
+    RunSession(options, progress);
+    FAIL() << "a session without its camera";
+  } catch (const DeviceError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("ptpip:127.0.0.1:1:1"));
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir_.path() / "sessions" / "missing-camera"));
+
+  // A camera with another serial than the rig expects (swapped cables).
+  config = Config();
+  config.cameras[0].serial = "EMU1";
+  options.hardware = config;
+  try {
+    RunSession(options, progress);
+    FAIL() << "a swapped camera";
+  } catch (const DeviceError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("the rig expects EMU1"));
+  }
+}
+
+TEST(RigConfigTest, MalformedRigFilesNameTheFieldAndTheFile) {
+  testing::TempDir dir;
+  const auto file = dir / "rig.json";
+  WriteFileAtomic(file, std::string("{\"format\": \"carousel-rig\", \"version\": 1}"));
+  EXPECT_THAT([&] { ReadRigConfig(file); },
+              ::testing::ThrowsMessage<FormatError>(HasSubstr("turntable has no field 'port'")));
+  WriteFileAtomic(file, std::string("{\"format\": \"carousel-rig\", \"version\": 1, "
+                                    "\"turntable\": {\"port\": \"/dev/ttyACM0\"}, "
+                                    "\"cameras\": [{\"port\": \"usb:001,002\"}]}"));
+  EXPECT_THAT([&] { ReadRigConfig(file); },
+              ::testing::ThrowsMessage<FormatError>(HasSubstr("cameras[0] has no calibration")));
+  WriteFileAtomic(file, std::string("{\"version\": 2}"));
+  EXPECT_THROW(ReadRigConfig(file), FormatError);
+  EXPECT_THROW(ReadRigConfig(dir / "none.json"), IoError);
+}
+
+}  // namespace
+}  // namespace carousel::studio
