@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <span>
 #include <sstream>
 #include <string_view>
 
@@ -430,6 +431,29 @@ void WriteMesh(const Mesh& mesh, const std::filesystem::path& path,
     io_options += OpenMesh::IO::Options::FaceTexCoord;
   }
   if (options.write_normals) io_options += OpenMesh::IO::Options::VertexNormal;
+  if (format != MeshFormat::kObj) {
+    // PLY and OFF are serialised in memory and written by WriteFileAtomic, which checks every
+    // write: OpenMesh's own file output ignores a short write (a full disk, a size limit).
+    std::ostringstream stream(std::ios::out | std::ios::binary);
+    bool ok = false;
+    std::string openmesh_messages;
+    {
+      internal::OpenMeshCapture capture;
+      ok = OpenMesh::IO::write_mesh(mesh, stream, path.extension().string(), io_options,
+                                    options.precision);
+      openmesh_messages = capture.Text();
+    }
+    if (!ok) {
+      throw IoError(
+          path, "cannot write mesh" + (openmesh_messages.empty() ? "" : ": " + openmesh_messages));
+    }
+    const std::string bytes = stream.str();
+    WriteFileAtomic(path,
+                    std::span<const std::uint8_t>(
+                        reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size()),
+                    {.overwrite = options.overwrite});
+    return;
+  }
   // Write beside the target under a temporary name with the same extension, then rename.
   std::filesystem::path temporary = TemporarySibling(path);
   temporary += path.extension();

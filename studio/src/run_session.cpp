@@ -423,7 +423,8 @@ RunResult RunSession(const RunOptions& options, Progress& progress) {
     std::filesystem::rename(folder, aside);
     CAROUSEL_LOG_INFO("kept the previous session as " << aside);
   }
-  std::filesystem::create_directories(folder / "images");
+  std::filesystem::create_directories(folder / "images", ec);
+  if (ec) throw IoError(folder, "cannot create the session folder: " + ec.message());
   WriteFileAtomic(folder / kRunFile, RunToJson(options).dump(2));
   Session session;
   session.product = options.product;

@@ -5,6 +5,7 @@
 #include <fcntl.h>
 #include <signal.h>
 #include <spawn.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -203,6 +204,59 @@ TEST(RunSessionTest, ResumeRetakesMissingAndDamagedPhotosAndKeepsTheDamagedCopy)
   EXPECT_FALSE(again.textured);
   // An existing session is never replaced without --force.
   EXPECT_EQ(Wait(Spawn(RunArgs(dir.path()))), kExitIoError);
+}
+
+// The program under a file-size limit (a full disk as far as the writes can tell): its output
+// goes to `log`.
+int RunLimited(const std::vector<std::string>& args, rlim_t max_file_bytes,
+               const std::filesystem::path& log) {
+  std::vector<std::string> all = {(testing::BinDir() / "carousel").string()};
+  all.insert(all.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  for (auto& a : all) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  const int out = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    // Only async-signal-safe calls between fork and exec.
+    const rlimit limit{max_file_bytes, max_file_bytes};
+    ::setrlimit(RLIMIT_FSIZE, &limit);
+    ::dup2(out, 1);
+    ::dup2(out, 2);
+    ::execv(argv[0], argv.data());
+    ::_exit(127);
+  }
+  ::close(out);
+  return Wait(pid);
+}
+
+TEST(RunSessionTest, FullDiskAndUnwritableFolderAreClearErrorsAndLoseNothing) {
+  TempDir dir;
+  // Enough for the photos (about 15 kB each), not for the hull mesh.
+  const auto log = dir / "log.txt";
+  const int code = RunLimited(RunArgs(dir.path() / "out", /*small=*/true), 60 * 1024, log);
+  const std::string text = testing::ReadBytes(log);
+  EXPECT_EQ(code, kExitIoError) << text;
+  EXPECT_THAT(text, ::testing::HasSubstr("File too large"));
+  EXPECT_THAT(
+      text, ::testing::HasSubstr("kill-test/recon/"));  // names the file that could not be written
+  const auto session = dir.path() / "out" / "kill-test";
+  const auto photos = Recorded(session);
+  EXPECT_EQ(photos.size(), 6u);  // every photo was taken and recorded before the failure
+  for (const auto& [image, sha] : photos) EXPECT_EQ(FileSha256(session / image), sha) << image;
+  // With room again, the session resumes without retaking anything.
+  Progress progress;
+  const RunResult result = ResumeSession(session, progress);
+  EXPECT_EQ(result.photos_kept, 6);
+  EXPECT_EQ(result.photos_taken, 0);
+  EXPECT_TRUE(std::filesystem::exists(session / "model" / "model.glb"));
+
+  // An output folder that cannot be created (a file stands in the way).
+  testing::WriteBytes(dir / "blocker", "x");
+  std::vector<std::string> args = RunArgs(dir.path() / "blocker" / "sessions", true);
+  const int blocked = RunLimited(args, RLIM_INFINITY, log);
+  EXPECT_EQ(blocked, kExitIoError) << testing::ReadBytes(log);
+  EXPECT_THAT(testing::ReadBytes(log), ::testing::HasSubstr("blocker"));
 }
 
 }  // namespace
