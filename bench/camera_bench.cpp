@@ -103,6 +103,7 @@ int Run(int argc, char** argv) {
   for (int s = 0; s < shots; ++s) {
     const auto round_start = Clock::now();
     std::vector<std::future<std::pair<double, double>>> futures;
+    futures.reserve(static_cast<std::size_t>(cameras));
     for (int c = 0; c < cameras; ++c) {
       futures.push_back(std::async(std::launch::async, [&, c, s] {
         const auto t0 = Clock::now();
@@ -121,6 +122,7 @@ int Run(int argc, char** argv) {
     }
     round_ms.Add(Ms(Clock::now() - round_start));
     std::vector<Clock::time_point> arrivals;
+    arrivals.reserve(emulators.size());
     for (const auto& e : emulators) arrivals.push_back(e->Photos().back().triggered_at);
     const auto [lo, hi] = std::minmax_element(arrivals.begin(), arrivals.end());
     skew_ms.Add(Ms(*hi - *lo));

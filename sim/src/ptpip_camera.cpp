@@ -452,12 +452,10 @@ class PtpIpCamera::Impl {
         ::close(fd);
       }
     } catch (const ConnectionLost&) {
-      if (fd == cmd_fd_) {
+      if (fd == cmd_fd_ || fd == event_fd_) {
         CloseSession();
-      } else if (fd != event_fd_) {
-        ::close(fd);
       } else {
-        CloseSession();
+        ::close(fd);
       }
     }
   }
@@ -915,7 +913,7 @@ class PtpIpCamera::Impl {
 PtpIpCamera::PtpIpCamera(PtpIpShutter shutter, PtpIpCameraOptions options)
     : impl_(std::make_unique<Impl>(std::move(shutter), std::move(options))) {}
 
-PtpIpCamera::PtpIpCamera(std::shared_ptr<SimCamera> camera, PtpIpCameraOptions options)
+PtpIpCamera::PtpIpCamera(const std::shared_ptr<SimCamera>& camera, PtpIpCameraOptions options)
     : PtpIpCamera(
           [camera](const std::map<std::string, std::string>& settings) {
             for (const auto& [name, value] : settings) {

@@ -287,6 +287,7 @@ TEST_F(GPhotoTest, ThreeCamerasCaptureInParallelWithSmallTriggerSkew) {
   double worst_skew_ms = 0;
   for (int round = 0; round < kRounds; ++round) {
     std::vector<std::future<void>> shots;
+    shots.reserve(3);
     for (int i = 0; i < 3; ++i) {
       shots.push_back(std::async(std::launch::async, [&, i] {
         const rig::CapturedPhoto p = cameras[i]->Capture(10s);
@@ -295,6 +296,7 @@ TEST_F(GPhotoTest, ThreeCamerasCaptureInParallelWithSmallTriggerSkew) {
     }
     for (auto& s : shots) s.get();
     std::vector<Clock::time_point> arrivals;
+    arrivals.reserve(emulators.size());
     for (const auto& e : emulators) arrivals.push_back(e->Photos().back().triggered_at);
     const auto [lo, hi] = std::minmax_element(arrivals.begin(), arrivals.end());
     worst_skew_ms =

@@ -213,6 +213,7 @@ int RunLimited(const std::vector<std::string>& args, rlim_t max_file_bytes,
   std::vector<std::string> all = {(testing::BinDir() / "carousel").string()};
   all.insert(all.end(), args.begin(), args.end());
   std::vector<char*> argv;
+  argv.reserve(all.size() + 1);
   for (auto& a : all) argv.push_back(a.data());
   argv.push_back(nullptr);
   const int out = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);

@@ -76,7 +76,7 @@ class PtpIpCamera {
   PtpIpCamera(PtpIpShutter shutter, PtpIpCameraOptions options = {});
   // A camera photographing the simulated rig: `camera` renders, its settings follow the PTP
   // properties the client sets.
-  PtpIpCamera(std::shared_ptr<SimCamera> camera, PtpIpCameraOptions options = {});
+  PtpIpCamera(const std::shared_ptr<SimCamera>& camera, PtpIpCameraOptions options = {});
   ~PtpIpCamera();
   PtpIpCamera(const PtpIpCamera&) = delete;
   PtpIpCamera& operator=(const PtpIpCamera&) = delete;
