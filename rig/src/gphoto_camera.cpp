@@ -1,6 +1,8 @@
 #include "carousel/rig/gphoto_camera.h"
 
+#include <dlfcn.h>
 #include <fcntl.h>
+#include <link.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -80,6 +82,23 @@ void KeepFdZeroOccupied() {
   if (::fcntl(0, F_GETFD) != -1 || errno != EBADF) return;
   const int fd = ::open("/dev/null", O_RDONLY);  // the lowest free descriptor: 0
   if (fd > 0) ::close(fd);                       // 0 was taken meanwhile: leave it
+}
+
+// Keeps every libgphoto2 camera and port driver loaded for the life of the process: libgphoto2
+// dlopens a driver on gp_camera_init and dlcloses it on exit, so each reconnect would load and
+// unload it again (and a leak report could not name its frames). RTLD_NOLOAD only takes another
+// reference on what is already mapped; RTLD_NODELETE makes it permanent.
+void PinLoadedDrivers() {
+  dl_iterate_phdr(
+      [](dl_phdr_info* info, std::size_t, void*) {
+        const std::string path = info->dlpi_name ? info->dlpi_name : "";
+        if (path.find("/libgphoto2/") != std::string::npos ||
+            path.find("/libgphoto2_port/") != std::string::npos) {
+          ::dlopen(path.c_str(), RTLD_NOW | RTLD_NOLOAD | RTLD_NODELETE);
+        }
+        return 0;
+      },
+      nullptr);
 }
 
 // gp_camera_exit + unref, then the fd-0 guard (the caller holds LibraryMutex()).
@@ -397,6 +416,7 @@ class GPhotoCamera::Impl : public std::enable_shared_from_this<GPhotoCamera::Imp
     gp_port_info_list_get_info(Ports(), port_index, &info);
     gp_camera_set_port_info(camera_, info);
     const int r = gp_camera_init(camera_, context_);
+    PinLoadedDrivers();
     if (r < GP_OK) {
       Close(false);
       throw DeviceError(device_, "cannot open the camera: " + Describe(r));
