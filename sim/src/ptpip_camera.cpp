@@ -19,6 +19,8 @@
 #include <sstream>
 #include <thread>
 
+#include <opencv2/imgcodecs.hpp>
+
 #include "carousel/core/error.h"
 #include "carousel/core/logging.h"
 #include "carousel/rig/camera.h"
@@ -62,6 +64,8 @@ enum Op : std::uint16_t {
   kGetDevicePropValue = 0x1015,
   kSetDevicePropValue = 0x1016,
   kGetPartialObject = 0x101B,
+  kGetStreamInfo = 0x1024,  // PTP 1.1 streams: libgphoto2's live view for generic cameras
+  kGetStream = 0x1025,
 };
 
 enum Response : std::uint16_t {
@@ -92,6 +96,8 @@ enum Prop : std::uint16_t {
   kFNumber = 0x5007,
   kExposureTime = 0x500D,
   kExposureIndex = 0x500F,
+  kSupportedStreams = 0x5020,
+  kEnabledStreams = 0x5021,
 };
 
 constexpr std::uint32_t kStorageId = 0x00010001;
@@ -295,8 +301,9 @@ void PtpIpCameraOptions::Validate() const {
 
 class PtpIpCamera::Impl {
  public:
-  Impl(PtpIpShutter shutter, PtpIpCameraOptions options)
-      : shutter_(std::move(shutter)), options_(std::move(options)) {
+  Impl(PtpIpShutter shutter, PtpIpCameraOptions options,
+       std::function<std::vector<std::uint8_t>()> preview)
+      : shutter_(std::move(shutter)), preview_(std::move(preview)), options_(std::move(options)) {
     options_.Validate();
     CAROUSEL_THROW_IF(!shutter_, InvalidArgument, "PTP/IP emulator needs a shutter");
     capture_delay_ = options_.capture_delay;
@@ -306,6 +313,8 @@ class PtpIpCamera::Impl {
     properties_[kExposureTime] = {
         0x0006, true, 80, 80, {10000, 5000, 2500, 1250, 666, 333, 166, 80, 40, 20, 10}};
     properties_[kExposureIndex] = {0x0004, true, 100, 100, {100, 200, 400, 800, 1600, 3200, 6400}};
+    properties_[kSupportedStreams] = {0x0006, false, 1, 1, {1}};  // bit 0: video
+    properties_[kEnabledStreams] = {0x0006, true, 0, 0, {0, 1}};
 
     const std::string where = options_.bind_address + ":" + std::to_string(options_.port);
     listen_fd_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
@@ -358,6 +367,16 @@ class PtpIpCamera::Impl {
     std::lock_guard<std::mutex> lock(mutex_);
     capture_delay_ = std::max(delay, std::chrono::milliseconds(0));
   }
+  void ReleaseShutter() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      external_releases_.push_back(Clock::now());
+      ++counters_.external_releases;
+    }
+    const std::uint64_t one = 1;
+    [[maybe_unused]] const ssize_t w = ::write(wake_fd_, &one, sizeof one);
+  }
+
   void DropDuringDownloads(std::uint64_t after_bytes, int count) {
     std::lock_guard<std::mutex> lock(mutex_);
     drop_after_bytes_ = after_bytes;
@@ -403,7 +422,11 @@ class PtpIpCamera::Impl {
         SendDueEvents();
         for (const pollfd& p : fds) {
           if (p.revents == 0) continue;
-          if (p.fd == listen_fd_) {
+          if (p.fd == wake_fd_) {
+            std::uint64_t count = 0;
+            [[maybe_unused]] const ssize_t r = ::read(wake_fd_, &count, sizeof count);
+            TakeExternalReleases();
+          } else if (p.fd == listen_fd_) {
             Accept();
           } else if (p.fd == cmd_fd_ && cmd_fd_ >= 0) {
             HandleCommand(ReadPacket(cmd_fd_));
@@ -458,6 +481,16 @@ class PtpIpCamera::Impl {
         ::close(fd);
       }
     }
+  }
+
+  // Photos released from outside (the remote socket) since the last look.
+  void TakeExternalReleases() {
+    std::vector<Clock::time_point> releases;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      releases.swap(external_releases_);
+    }
+    for (const Clock::time_point at : releases) TakePhoto(0, at);
   }
 
   void CloseSession() {
@@ -691,6 +724,16 @@ class PtpIpCamera::Impl {
         return PropertyDesc(c);
       case kSetDevicePropValue:
         return SetProperty(c);
+      case kGetStreamInfo: {
+        Writer w;
+        w.U64(36);                             // dataset size
+        w.U64(1000000);                        // time resolution: microseconds
+        for (int i = 0; i < 5; ++i) w.U32(0);  // no frame/packet headers, sizes unbounded
+        SendData(c, w);
+        return Respond(c, kOk);
+      }
+      case kGetStream:
+        return Stream(c);
       default:
         return Respond(c, kOperationNotSupported);
     }
@@ -706,7 +749,7 @@ class PtpIpCamera::Impl {
     w.Array16({kGetDeviceInfo, kOpenSession, kCloseSession, kGetStorageIds, kGetStorageInfo,
                kGetNumObjects, kGetObjectHandles, kGetObjectInfo, kGetObject, kDeleteObject,
                kInitiateCapture, kGetDevicePropDesc, kGetDevicePropValue, kSetDevicePropValue,
-               kGetPartialObject});
+               kGetPartialObject, kGetStreamInfo, kGetStream});
     w.Array16({kObjectAdded, 0x4003, 0x4006, kCaptureComplete});
     std::vector<std::uint16_t> props;
     {
@@ -795,9 +838,6 @@ class PtpIpCamera::Impl {
 
   void InitiateCapture(const Command& c) {
     const Clock::time_point arrived = Clock::now();
-    PtpIpEvents events;
-    std::chrono::milliseconds delay;
-    std::map<std::string, std::string> settings;
     {
       std::lock_guard<std::mutex> lock(mutex_);
       if (busy_ > 0) {
@@ -806,6 +846,20 @@ class PtpIpCamera::Impl {
         return Respond(c, kDeviceBusy);
       }
       ++counters_.captures;
+    }
+    // Answer first, like a camera: the photo appears later, announced by the events.
+    Respond(c, kOk);
+    TakePhoto(c.tid, arrived);
+  }
+
+  // Exposes, stores and announces a photo (InitiateCapture, or a release from outside with
+  // transaction id 0).
+  void TakePhoto(std::uint32_t tid, Clock::time_point arrived) {
+    PtpIpEvents events;
+    std::chrono::milliseconds delay;
+    std::map<std::string, std::string> settings;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
       events = events_;
       delay = capture_delay_;
       settings[rig::kSettingIso] = std::to_string(properties_[kExposureIndex].value);
@@ -813,8 +867,6 @@ class PtpIpCamera::Impl {
       settings[rig::kSettingShutterSpeed] = FormatShutter(properties_[kExposureTime].value);
       settings[rig::kSettingWhiteBalance] = WhiteBalanceName(properties_[kWhiteBalance].value);
     }
-    // Answer first, like a camera: the photo appears later, announced by the events.
-    Respond(c, kOk);
     PtpIpPhoto photo;
     photo.bytes = shutter_(settings);
     photo.triggered_at = arrived;
@@ -827,11 +879,24 @@ class PtpIpCamera::Impl {
     }
     const Clock::time_point due = std::max(Clock::now(), arrived + delay);
     if (events == PtpIpEvents::kAll || events == PtpIpEvents::kAddedOnly) {
-      pending_events_.push_back({due, kObjectAdded, c.tid, photo.handle});
+      pending_events_.push_back({due, kObjectAdded, tid, photo.handle});
     }
     if (events == PtpIpEvents::kAll || events == PtpIpEvents::kCompleteOnly) {
-      pending_events_.push_back({due, kCaptureComplete, c.tid, c.tid});
+      pending_events_.push_back({due, kCaptureComplete, tid, tid});
     }
+  }
+
+  // One live-view frame: a complete JPEG (libgphoto2 hands the data phase over as it is).
+  void Stream(const Command& c) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if ((properties_[kEnabledStreams].value & 1) == 0) return Respond(c, kAccessDenied);
+      ++counters_.preview_frames;
+    }
+    std::vector<std::uint8_t> frame =
+        preview_ ? preview_() : shutter_(std::map<std::string, std::string>{});
+    SendData(c, frame.data(), frame.size());
+    Respond(c, kOk);
   }
 
   void PropertyDesc(const Command& c) {
@@ -883,6 +948,7 @@ class PtpIpCamera::Impl {
   }
 
   PtpIpShutter shutter_;
+  std::function<std::vector<std::uint8_t>()> preview_;  // empty: a full photo per frame
   PtpIpCameraOptions options_;
   std::uint16_t port_ = 0;
   int listen_fd_ = -1;
@@ -905,24 +971,31 @@ class PtpIpCamera::Impl {
   int busy_ = 0;
   PtpIpEvents events_ = PtpIpEvents::kAll;
   std::chrono::milliseconds capture_delay_{0};
-  std::optional<std::uint64_t> drop_after_;  // object bytes still to serve before the drop
+  std::vector<Clock::time_point> external_releases_;  // not yet taken
+  std::optional<std::uint64_t> drop_after_;           // object bytes still to serve before the drop
   std::uint64_t drop_after_bytes_ = 0;
   int drops_left_ = 0;
 };
 
 PtpIpCamera::PtpIpCamera(PtpIpShutter shutter, PtpIpCameraOptions options)
-    : impl_(std::make_unique<Impl>(std::move(shutter), std::move(options))) {}
+    : impl_(std::make_unique<Impl>(std::move(shutter), std::move(options), nullptr)) {}
 
-PtpIpCamera::PtpIpCamera(const std::shared_ptr<SimCamera>& camera, PtpIpCameraOptions options)
-    : PtpIpCamera(
-          [camera](const std::map<std::string, std::string>& settings) {
-            for (const auto& [name, value] : settings) {
-              camera->SetSetting(name, value, std::chrono::milliseconds(0));
-            }
-            return camera->Shoot();
-          },
-          std::move(options)) {
+PtpIpCamera::PtpIpCamera(const std::shared_ptr<SimCamera>& camera, PtpIpCameraOptions options) {
   CAROUSEL_THROW_IF(!camera, InvalidArgument, "PTP/IP emulator needs a simulated camera");
+  impl_ = std::make_unique<Impl>(
+      [camera](const std::map<std::string, std::string>& settings) {
+        for (const auto& [name, value] : settings) {
+          camera->SetSetting(name, value, std::chrono::milliseconds(0));
+        }
+        return camera->Shoot();
+      },
+      std::move(options),
+      [camera] {
+        std::vector<std::uint8_t> jpeg;
+        cv::imencode(".jpg", camera->PreviewFrame(std::chrono::milliseconds(0)), jpeg,
+                     {cv::IMWRITE_JPEG_QUALITY, 80});
+        return jpeg;
+      });
 }
 
 PtpIpCamera::~PtpIpCamera() = default;
@@ -935,6 +1008,7 @@ std::string PtpIpCamera::gphoto_port() const {
 }
 
 void PtpIpCamera::SetBusy(int count) { impl_->SetBusy(count); }
+void PtpIpCamera::ReleaseShutter() { impl_->ReleaseShutter(); }
 void PtpIpCamera::SetEvents(PtpIpEvents events) { impl_->SetEvents(events); }
 void PtpIpCamera::SetCaptureDelay(std::chrono::milliseconds delay) {
   impl_->SetCaptureDelay(delay);

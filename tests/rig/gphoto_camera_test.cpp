@@ -168,6 +168,13 @@ TEST_F(GPhotoTest, PhotosAreRenderedBySimulatedRigAtTheTablesAngle) {
   const double bright_level = cv::mean(b(middle))[1];
   EXPECT_LT(dark_level, bright_level * 0.5) << dark_level << " vs " << bright_level;
   EXPECT_GT(dark_level, 2.0);  // and the photo is not empty
+
+  // Live view through libgphoto2's PTP 1.1 stream path: the simulated camera's preview.
+  const cv::Mat frame = camera.PreviewFrame(5s);
+  EXPECT_EQ(frame.cols, 640);
+  EXPECT_EQ(frame.rows, 480);
+  EXPECT_EQ(emulator.Counters().preview_frames, 1);
+  EXPECT_EQ(emulator.PropertyValues().at(0x5021), 1u);  // libgphoto2 enabled the stream
 }
 
 TEST_F(GPhotoTest, BusyCameraIsRetriedWithBackoffAndGivesUpClearly) {

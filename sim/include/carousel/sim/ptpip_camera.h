@@ -5,7 +5,9 @@
 // It speaks PTP/IP as libgphoto2 2.5.30 does (../shared/reference/rig-notes.md section 1): the
 // command and event sockets with their Init handshakes, the standard PTP operations a generic
 // camera (VendorExtensionID 0) needs, ObjectAdded and CaptureComplete events, GetPartialObject
-// for large photos and SetDevicePropValue with a host-to-device data phase. One client session
+// for large photos, SetDevicePropValue with a host-to-device data phase, and live view through
+// PTP 1.1 streams (SupportedStreams/EnabledStreams, GetStreamInfo, GetStream: the only preview
+// path libgphoto2 has for a generic camera). One client session
 // at a time; after the client leaves (or the connection drops) it accepts the next one, and
 // the photos stay on its card.
 //
@@ -67,6 +69,8 @@ struct PtpIpCounters {
   int captures = 0;                // InitiateCapture answered OK
   int busy_answers = 0;            // InitiateCapture answered Device Busy
   int drops = 0;                   // connections dropped on purpose
+  int preview_frames = 0;          // live-view frames served (GetStream)
+  int external_releases = 0;       // ReleaseShutter() calls
   std::uint64_t bytes_served = 0;  // object bytes sent
 };
 
@@ -75,7 +79,8 @@ class PtpIpCamera {
   // Listens at once; throws DeviceError naming the address if it cannot.
   PtpIpCamera(PtpIpShutter shutter, PtpIpCameraOptions options = {});
   // A camera photographing the simulated rig: `camera` renders, its settings follow the PTP
-  // properties the client sets.
+  // properties the client sets, and live view (PTP 1.1 streams) shows its preview frames.
+  // With the other constructor a live-view frame is a full photo from `shutter`.
   PtpIpCamera(const std::shared_ptr<SimCamera>& camera, PtpIpCameraOptions options = {});
   ~PtpIpCamera();
   PtpIpCamera(const PtpIpCamera&) = delete;
@@ -84,6 +89,10 @@ class PtpIpCamera {
   std::uint16_t port() const;
   // The libgphoto2 port path: "ptpip:127.0.0.1:P:P" (both sockets on one port; rig-notes 1.6.1).
   std::string gphoto_port() const;
+
+  // The remote-release socket: takes a photo as if the shutter button were pressed (a wired
+  // release from the turntable controller); ObjectAdded follows as after InitiateCapture.
+  void ReleaseShutter();
 
   // ---- faults (take effect for the next operations) ----
   // The next `count` InitiateCapture operations answer Device Busy (0x2019).
