@@ -586,6 +586,12 @@ class GPhotoCamera::Impl : public std::enable_shared_from_this<GPhotoCamera::Imp
       needs_reconnect_ = true;
       throw DeviceError(Where(), "the shutter could not be released: " + Describe(r));
     }
+    return WaitForNewPhoto(triggered, deadline);
+  }
+
+  // Waits for ObjectAdded after a release (ours or the controller's); the loop is ours because
+  // wait_for_event does not block over PTP/IP (rig-notes 1.6.4).
+  CapturedPhoto WaitForNewPhoto(Clock::time_point triggered, Clock::time_point deadline) {
     bool complete = false;
     while (Clock::now() < deadline) {
       CameraEventType type = GP_EVENT_TIMEOUT;
@@ -843,6 +849,7 @@ class GPhotoCamera::Impl : public std::enable_shared_from_this<GPhotoCamera::Imp
   std::string serial_;
   CameraInfo info_;
   std::atomic<bool> needs_reconnect_{false};
+  Clock::time_point external_armed_at_{};  // the worker's: when PrepareExternalRelease ran
   // The worker writes them; Counters() reads them without waiting for the worker.
   mutable std::mutex counters_mutex_;
   GPhotoCounters counters_;
@@ -944,6 +951,27 @@ void GPhotoCamera::Download(const CapturedPhoto& photo, const std::filesystem::p
         return 0;
       },
       timeout, "download of " + photo.camera_path);
+}
+
+void GPhotoCamera::PrepareExternalRelease(milliseconds timeout) {
+  Impl* impl = impl_.get();
+  impl->Run<int>(
+      [impl](Clock::time_point deadline) {
+        impl->EnsureOpen(deadline);
+        impl->DrainEvents();
+        impl->external_armed_at_ = Clock::now();
+        return 0;
+      },
+      timeout, "preparing for an external release");
+}
+
+CapturedPhoto GPhotoCamera::WaitForPhoto(milliseconds timeout) {
+  Impl* impl = impl_.get();
+  return impl->Run<CapturedPhoto>(
+      [impl](Clock::time_point deadline) {
+        return impl->WaitForNewPhoto(impl->external_armed_at_, deadline);
+      },
+      timeout, "waiting for the externally released photo");
 }
 
 cv::Mat GPhotoCamera::PreviewFrame(milliseconds timeout) {

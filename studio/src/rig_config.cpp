@@ -45,6 +45,11 @@ void CapturePlan::Validate() const {
                     "capture.settle_ms must be 0..60000");
   CAROUSEL_THROW_IF(!(move_timeout_s > 0) || !(camera_timeout_s > 0), InvalidArgument,
                     "capture timeouts must be > 0");
+  CAROUSEL_THROW_IF(
+      shutter != "camera" && shutter != "controller", InvalidArgument,
+      "capture.shutter must be \"camera\" or \"controller\", not \"" << shutter << "\"");
+  CAROUSEL_THROW_IF(shutter_pulse_ms < 1 || shutter_pulse_ms > 10000, InvalidArgument,
+                    "capture.shutter_pulse_ms must be 1..10000");
 }
 
 void RigConfig::Validate() const {
@@ -61,6 +66,9 @@ void RigConfig::Validate() const {
   CAROUSEL_THROW_IF((turntable.gear_num.has_value()) != (turntable.gear_den.has_value()),
                     InvalidArgument, "the turntable gear needs both NUM and DEN");
   capture.Validate();
+  CAROUSEL_THROW_IF(capture.shutter == "controller" && cameras.size() > 4, InvalidArgument,
+                    "the turntable controller has 4 shutter outputs; the rig has " << cameras.size()
+                                                                                   << " cameras");
 }
 
 std::string RigConfigToJsonText(const RigConfig& config) {
@@ -87,6 +95,8 @@ std::string RigConfigToJsonText(const RigConfig& config) {
                    {{"stops", config.capture.stops},
                     {"settle_ms", config.capture.settle_ms},
                     {"delete_from_camera", config.capture.delete_from_camera},
+                    {"shutter", config.capture.shutter},
+                    {"shutter_pulse_ms", config.capture.shutter_pulse_ms},
                     {"move_timeout_s", config.capture.move_timeout_s},
                     {"camera_timeout_s", config.capture.camera_timeout_s}}},
                   {"backdrop", config.backdrop}};
@@ -149,6 +159,10 @@ RigConfig RigConfigFromJsonText(const std::string& text, const std::filesystem::
       GetOr<int>(p, "settle_ms", config.capture.settle_ms, source, "capture");
   config.capture.delete_from_camera =
       GetOr<bool>(p, "delete_from_camera", config.capture.delete_from_camera, source, "capture");
+  config.capture.shutter =
+      GetOr<std::string>(p, "shutter", config.capture.shutter, source, "capture");
+  config.capture.shutter_pulse_ms =
+      GetOr<int>(p, "shutter_pulse_ms", config.capture.shutter_pulse_ms, source, "capture");
   config.capture.move_timeout_s =
       GetOr<double>(p, "move_timeout_s", config.capture.move_timeout_s, source, "capture");
   config.capture.camera_timeout_s =
@@ -188,6 +202,14 @@ RigBackends OpenHardwareRig(const RigConfig& config) {
     table->SetConfig(c);
   }
   rig.turntable = table;
+  if (config.capture.shutter == "controller") {
+    const auto pulse = static_cast<std::uint16_t>(config.capture.shutter_pulse_ms);
+    rig.release = [table, pulse](const std::vector<int>& cameras) {
+      std::uint8_t mask = 0;
+      for (const int c : cameras) mask |= static_cast<std::uint8_t>(1u << c);
+      table->Trigger(mask, CP_OUTPUT_SHUTTER, pulse);
+    };
+  }
   const auto timeout =
       std::chrono::milliseconds(static_cast<long long>(config.capture.camera_timeout_s * 1000));
   for (const RigCameraConfig& c : config.cameras) {

@@ -257,12 +257,24 @@ RunResult Continue(const std::filesystem::path& folder, const RunOptions& option
     if (moving_to != stop) rig.turntable->StartMoveTo(angle);
     rig.turntable->WaitUntilStopped(move_timeout);
     if (plan.settle_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(plan.settle_ms));
-    // Every camera of this stop fires at once.
+    // Every camera of this stop fires at once: triggered through libgphoto2, or released
+    // together by the controller's shutter outputs.
     std::vector<std::future<rig::CapturedPhoto>> shots;
+    shots.reserve(to_take.size());
+    const bool external = static_cast<bool>(rig.release);
+    if (external) {
+      std::vector<int> released;
+      released.reserve(to_take.size());
+      for (const SessionView& view : to_take) {
+        rig.cameras[view.camera]->PrepareExternalRelease(camera_timeout);
+        released.push_back(view.camera);
+      }
+      rig.release(released);
+    }
     for (const SessionView& view : to_take) {
       rig::Camera* camera = rig.cameras[view.camera].get();
-      shots.push_back(std::async(std::launch::async, [camera, camera_timeout] {
-        return camera->Capture(camera_timeout);
+      shots.push_back(std::async(std::launch::async, [camera, camera_timeout, external] {
+        return external ? camera->WaitForPhoto(camera_timeout) : camera->Capture(camera_timeout);
       }));
     }
     std::exception_ptr error;

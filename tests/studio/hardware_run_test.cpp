@@ -6,12 +6,14 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cmath>
 #include <cstdlib>
 #include <iostream>
 #include <map>
 #include <memory>
 #include <numbers>
+#include <thread>
 
 #include "carousel/core/error.h"
 #include "carousel/core/file_util.h"
@@ -138,6 +140,57 @@ TEST_F(HardwareRunTest, SixteenStopsThroughTheFirmwareAndLibgphoto2IntoASession)
   ASSERT_EQ(result.texture.held_out.size(), 1u);
   std::cout << "held-out view 3: PSNR " << result.texture.held_out[0].psnr_db << " dB\n";
   EXPECT_GT(result.texture.held_out[0].psnr_db, 17.0);
+}
+
+TEST_F(HardwareRunTest, ControllerShutterOutputsReleaseTheCameras) {
+  // The wiring: the controller's shutter output i goes to camera i's remote socket.
+  std::atomic<bool> stop{false};
+  std::thread wiring([&] {
+    std::size_t seen = 0;
+    while (!stop) {
+      const std::vector<sim::OutputPulse> pulses = controller_->output_pulses();
+      for (; seen < pulses.size(); ++seen) {
+        const int output = pulses[seen].output;
+        if (output < static_cast<int>(emulators_.size())) emulators_[output]->ReleaseShutter();
+      }
+      std::this_thread::sleep_for(2ms);
+    }
+  });
+  RigConfig config = Config();
+  config.capture.stops = 8;
+  config.capture.shutter = "controller";
+  config.capture.shutter_pulse_ms = 60;
+  RunOptions options;
+  options.hardware = config;
+  options.product = "controller-shutter";
+  options.out = dir_.path() / "sessions";
+  Progress progress;
+  RunResult result;
+  EXPECT_NO_THROW(result = RunSession(options, progress));
+  stop = true;
+  wiring.join();
+  EXPECT_EQ(result.photos_taken, 16);
+  for (std::size_t c = 0; c < emulators_.size(); ++c) {
+    const sim::PtpIpCounters counters = emulators_[c]->Counters();
+    EXPECT_EQ(counters.external_releases, 8) << c;
+    EXPECT_EQ(counters.captures, 0) << c;  // libgphoto2 never triggered them
+    const std::vector<sim::PtpIpPhoto> served = emulators_[c]->Photos();
+    ASSERT_EQ(served.size(), 8u);
+    for (int stop_index = 0; stop_index < 8; ++stop_index) {
+      const auto file =
+          result.session / "images" / (ViewStem(static_cast<int>(c), stop_index) + ".jpg");
+      EXPECT_EQ(ReadFileBytes(file), served[stop_index].bytes) << file;
+    }
+  }
+  // Both shutters were pulsed together, 8 times, for 60 ms (16 MHz cycles).
+  const std::vector<sim::OutputPulse> pulses = controller_->output_pulses();
+  ASSERT_EQ(pulses.size(), 16u);
+  for (std::size_t i = 0; i + 1 < pulses.size(); i += 2) {
+    EXPECT_NEAR(static_cast<double>(pulses[i].start_cycle),
+                static_cast<double>(pulses[i + 1].start_cycle), 160.0);  // within 10 us
+    EXPECT_NEAR(static_cast<double>(pulses[i].end_cycle - pulses[i].start_cycle) / 16e6, 0.060,
+                0.002);
+  }
 }
 
 TEST_F(HardwareRunTest, CameraMissingAtStartIsAClearErrorAndWritesNothing) {

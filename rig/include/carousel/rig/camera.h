@@ -20,6 +20,8 @@
 
 #include <opencv2/core.hpp>
 
+#include "carousel/core/error.h"
+
 namespace carousel::rig {
 
 // Well-known setting names.
@@ -63,6 +65,17 @@ class Camera {
                         bool delete_from_camera, std::chrono::milliseconds timeout) = 0;
   // A live-view frame (8-bit BGR, any size the camera offers).
   virtual cv::Mat PreviewFrame(std::chrono::milliseconds timeout) = 0;
+
+  // A shutter released from outside the camera (the turntable controller's shutter output
+  // wired to its remote socket): PrepareExternalRelease() before the release, then
+  // WaitForPhoto() returns the photo the release produced. Backends that cannot be released
+  // from outside throw DeviceError.
+  virtual void PrepareExternalRelease(std::chrono::milliseconds /*timeout*/) {
+    throw DeviceError(Identify().port, "this camera cannot be released from outside");
+  }
+  virtual CapturedPhoto WaitForPhoto(std::chrono::milliseconds /*timeout*/) {
+    throw DeviceError(Identify().port, "this camera cannot be released from outside");
+  }
 };
 
 }  // namespace carousel::rig

@@ -77,6 +77,8 @@ class GPhotoCamera : public Camera {
   void Download(const CapturedPhoto& photo, const std::filesystem::path& destination,
                 bool delete_from_camera, std::chrono::milliseconds timeout) override;
   cv::Mat PreviewFrame(std::chrono::milliseconds timeout) override;
+  void PrepareExternalRelease(std::chrono::milliseconds timeout) override;
+  CapturedPhoto WaitForPhoto(std::chrono::milliseconds timeout) override;
 
   // libgphoto2's summary text of the camera.
   std::string Summary(std::chrono::milliseconds timeout);

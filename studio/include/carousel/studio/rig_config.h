@@ -12,12 +12,14 @@
 //                  "calibration": { camera model: intrinsics, distortion, cam_from_world =
 //                                   cam_from_table at table angle 0, as in session.json }}],
 //     "capture": {"stops": 16, "settle_ms": 300, "delete_from_camera": true,
+//                 "shutter": "camera" | "controller", "shutter_pulse_ms": 100,
 //                 "move_timeout_s": 60, "camera_timeout_s": 60},
 //     "backdrop": "white"
 //   }
 #pragma once
 
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <memory>
 #include <optional>
@@ -48,6 +50,10 @@ struct CapturePlan {
   int stops = 16;                  // turntable stops per turn (as the paper)
   int settle_ms = 300;             // wait after a move before firing (vibration)
   bool delete_from_camera = true;  // once the photo is safely on disk
+  // Who releases the shutters: "camera" (libgphoto2 triggers each camera) or "controller" (the
+  // turntable controller's shutter outputs, camera i wired to output i: all fire together).
+  std::string shutter = "camera";
+  int shutter_pulse_ms = 100;  // controller: how long the release is held
   double move_timeout_s = 60.0;
   double camera_timeout_s = 60.0;
   void Validate() const;
@@ -75,6 +81,8 @@ struct RigBackends {
   std::vector<std::unique_ptr<rig::Camera>> cameras;
   std::vector<CameraModel> cam_from_table;  // per camera: cam_from_world at table angle 0
   CapturePlan plan;
+  // With plan.shutter == "controller": pulses the shutter outputs of these cameras at once.
+  std::function<void(const std::vector<int>& cameras)> release;
 };
 
 // Opens the turntable controller (serial) and the cameras (libgphoto2), checks the serial
