@@ -21,6 +21,7 @@
 #include "carousel/core/version.h"
 #include "carousel/studio/camera_command.h"
 #include "carousel/studio/import.h"
+#include "carousel/studio/pipeline.h"
 #include "carousel/studio/reconstruct.h"
 #include "carousel/studio/run_session.h"
 #include "carousel/studio/self_check.h"
@@ -186,11 +187,8 @@ struct ReconstructArgs {
   std::string method = "key";
 };
 
-int RunReconstruct(ReconstructArgs& args, std::ostream& out, std::ostream& err) {
-  args.options.silhouettes.method = recon::ParseSilhouetteMethod(args.method);
-  CliProgress cli(err);
-  const ReconstructResult result = ReconstructSession(args.session, args.options, cli.progress);
-  const std::filesystem::path& s = args.session;
+void PrintReconstruct(const std::filesystem::path& s, const ReconstructResult& result,
+                      std::ostream& out) {
   out << std::fixed << std::setprecision(2) << "masks " << (s / "masks").string() << ": "
       << result.views << " silhouettes (" << result.seconds_silhouettes << " s)\n"
       << "hull " << (s / "recon/hull.ply").string() << ": " << result.hull_faces << " faces, "
@@ -209,6 +207,12 @@ int RunReconstruct(ReconstructArgs& args, std::ostream& out, std::ostream& err) 
         << worst->view << " " << worst->mean_deviation_px << " px (IoU " << std::setprecision(4)
         << worst->iou << ")\n";
   }
+}
+
+int RunReconstruct(ReconstructArgs& args, std::ostream& out, std::ostream& err) {
+  args.options.silhouettes.method = recon::ParseSilhouetteMethod(args.method);
+  CliProgress cli(err);
+  PrintReconstruct(args.session, ReconstructSession(args.session, args.options, cli.progress), out);
   return kExitOk;
 }
 
@@ -293,6 +297,9 @@ int RunOneButton(RunArgs& args, std::ostream& out, std::ostream& err) {
       << result.photos_retaken << " retaken; reconstruct "
       << (result.reconstructed ? "ran" : "was current") << ", texture "
       << (result.textured ? "ran" : "was current") << "\n";
+  if (result.photos_taken > 0 && result.max_trigger_skew_ms > 0)
+    out << std::fixed << std::setprecision(1) << "trigger skew between cameras: at most "
+        << result.max_trigger_skew_ms << " ms\n";
   if (result.textured) PrintTexture(result.session, result.texture, out);
   const auto model = result.session / "model";
   out << "model: " << (model / "model.obj").string() << " (+ model.mtl, model.png), "
@@ -362,6 +369,53 @@ int ExitCodeFor(const std::exception& error) {
   if (dynamic_cast<const DeviceError*>(&error)) return kExitDeviceError;
   if (dynamic_cast<const ProtocolError*>(&error)) return kExitProtocol;
   return kExitFailure;
+}
+
+struct ProcessArgs {
+  std::vector<std::filesystem::path> sessions;
+  bool force = false;
+  int faces = ReconstructOptions{}.mesh.target_faces;
+  std::vector<int> exclude_views;
+};
+
+// Every session in turn; a failing one is reported and the batch goes on. The exit code is
+// the first failure's (0 when every session is processed).
+int RunProcess(ProcessArgs& args, std::ostream& out, std::ostream& err) {
+  ProcessOptions options;
+  options.force = args.force;
+  options.reconstruct.mesh.target_faces = args.faces;
+  options.texture.grouping.exclude_views = args.exclude_views;
+  int status = kExitOk;
+  int failed = 0;
+  for (const std::filesystem::path& session : args.sessions) {
+    out << "session " << session.string() << "\n";
+    try {
+      CliProgress cli(err);
+      const ProcessResult result = ProcessSession(session, options, cli.progress);
+      if (result.reconstruct) {
+        PrintReconstruct(session, *result.reconstruct, out);
+      } else {
+        out << "reconstruct: current, skipped\n";
+      }
+      if (result.texture) {
+        PrintTexture(session, *result.texture, out);
+      } else {
+        out << "texture: current, skipped\n";
+      }
+    } catch (const std::exception& e) {
+      err << "carousel process: " << session.string() << ": error: " << e.what() << '\n';
+      if (status == kExitOk) status = ExitCodeFor(e);
+      ++failed;
+      if (dynamic_cast<const Cancelled*>(&e)) break;
+    }
+  }
+  if (args.sessions.size() > 1) {
+    out << args.sessions.size() - static_cast<std::size_t>(failed) << " of " << args.sessions.size()
+        << " sessions processed";
+    if (failed > 0) out << ", " << failed << " failed";
+    out << "\n";
+  }
+  return status;
 }
 
 }  // namespace
@@ -652,10 +706,19 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
       ->capture_default_str();
 
   // carousel process SESSION...: reconstruct + texture
-  std::vector<std::filesystem::path> process_sessions;
+  ProcessArgs process_args;
   CLI::App* process_command = app.add_subcommand(
-      "process", "every processing stage (reconstruct, texture) of one or more sessions");
-  process_command->add_option("sessions", process_sessions, "session folders")->required();
+      "process",
+      "the processing stages (reconstruct, texture) of one or more sessions, each skipped when "
+      "its outputs are current");
+  process_command->add_option("sessions", process_args.sessions, "session folders")->required();
+  process_command->add_flag("--force", process_args.force, "run every stage, current or not");
+  process_command->add_option("--faces", process_args.faces, "faces of the optimized mesh")
+      ->capture_default_str();
+  process_command
+      ->add_option("--exclude-views", process_args.exclude_views,
+                   "views not to texture from (held out and scored), e.g. 3,11")
+      ->delimiter(',');
   CLI::App* atlas_command = texture_command->add_subcommand(
       "atlas", "charts, flattening and packing of a mesh: an OBJ with UVs");
   atlas_command->add_option("mesh", atlas.mesh, "mesh file (OBJ, PLY, OFF)")->required();
@@ -718,19 +781,7 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
       }
       return RunTexture(texture_args, out, err);
     }
-    if (process_command->parsed()) {
-      PrepareTexture(texture_args);
-      reconstruct.options.silhouettes.method = recon::ParseSilhouetteMethod(reconstruct.method);
-      for (const auto& session : process_sessions) {
-        out << "session " << session.string() << "\n";
-        ReconstructArgs r = reconstruct;
-        r.session = session;
-        RunReconstruct(r, out, err);
-        CliProgress cli(err);
-        PrintTexture(session, TextureSession(session, texture_args.options, cli.progress), out);
-      }
-      return kExitOk;
-    }
+    if (process_command->parsed()) return RunProcess(process_args, out, err);
     err << "carousel: no subcommand\n";
     return kExitUsage;
   } catch (const std::exception& e) {

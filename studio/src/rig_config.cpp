@@ -66,6 +66,11 @@ void RigConfig::Validate() const {
   CAROUSEL_THROW_IF((turntable.gear_num.has_value()) != (turntable.gear_den.has_value()),
                     InvalidArgument, "the turntable gear needs both NUM and DEN");
   capture.Validate();
+  CAROUSEL_THROW_IF(backdrop != "key" && backdrop != "difference", InvalidArgument,
+                    "backdrop must be \"key\" or \"difference\", not \"" << backdrop << "\"");
+  CAROUSEL_THROW_IF(backdrop == "difference" && backgrounds.empty(), InvalidArgument,
+                    "backdrop \"difference\" needs \"backgrounds\": a folder with cam<C>.jpg, a "
+                    "photo of the empty turntable by each camera");
   CAROUSEL_THROW_IF(capture.shutter == "controller" && cameras.size() > 4, InvalidArgument,
                     "the turntable controller has 4 shutter outputs; the rig has " << cameras.size()
                                                                                    << " cameras");
@@ -87,19 +92,20 @@ std::string RigConfigToJsonText(const RigConfig& config) {
                        {"settings", c.settings},
                        {"calibration", CameraModelToJson(c.calibration)}});
   }
-  const json j = {{"format", "carousel-rig"},
-                  {"version", 1},
-                  {"turntable", turntable},
-                  {"cameras", cameras},
-                  {"capture",
-                   {{"stops", config.capture.stops},
-                    {"settle_ms", config.capture.settle_ms},
-                    {"delete_from_camera", config.capture.delete_from_camera},
-                    {"shutter", config.capture.shutter},
-                    {"shutter_pulse_ms", config.capture.shutter_pulse_ms},
-                    {"move_timeout_s", config.capture.move_timeout_s},
-                    {"camera_timeout_s", config.capture.camera_timeout_s}}},
-                  {"backdrop", config.backdrop}};
+  json j = {{"format", "carousel-rig"},
+            {"version", 1},
+            {"turntable", turntable},
+            {"cameras", cameras},
+            {"capture",
+             {{"stops", config.capture.stops},
+              {"settle_ms", config.capture.settle_ms},
+              {"delete_from_camera", config.capture.delete_from_camera},
+              {"shutter", config.capture.shutter},
+              {"shutter_pulse_ms", config.capture.shutter_pulse_ms},
+              {"move_timeout_s", config.capture.move_timeout_s},
+              {"camera_timeout_s", config.capture.camera_timeout_s}}},
+            {"backdrop", config.backdrop}};
+  if (!config.backgrounds.empty()) j["backgrounds"] = config.backgrounds.string();
   return j.dump(2) + "\n";
 }
 
@@ -168,6 +174,10 @@ RigConfig RigConfigFromJsonText(const std::string& text, const std::filesystem::
   config.capture.camera_timeout_s =
       GetOr<double>(p, "camera_timeout_s", config.capture.camera_timeout_s, source, "capture");
   config.backdrop = GetOr<std::string>(j, "backdrop", config.backdrop, source, "rig");
+  config.backgrounds = GetOr<std::string>(j, "backgrounds", "", source, "rig");
+  // Relative to the rig file.
+  if (!config.backgrounds.empty() && config.backgrounds.is_relative() && !source.empty())
+    config.backgrounds = source.parent_path() / config.backgrounds;
   try {
     config.Validate();
   } catch (const InvalidArgument& e) {

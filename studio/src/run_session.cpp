@@ -1,7 +1,5 @@
 #include "carousel/studio/run_session.h"
 
-#include <openssl/evp.h>
-
 #include <array>
 #include <chrono>
 #include <fstream>
@@ -20,6 +18,7 @@
 #include "carousel/core/timer.h"
 #include "carousel/sim/scene.h"
 #include "carousel/sim/sim_rig.h"
+#include "carousel/studio/pipeline.h"
 #include "carousel/studio/session.h"
 
 namespace carousel::studio {
@@ -279,6 +278,27 @@ RunResult Continue(const std::filesystem::path& folder, const RunOptions& option
     }
     std::exception_ptr error;
     const std::vector<std::optional<rig::CapturedPhoto>> photos = JoinAll(shots, &error);
+    // Trigger skew: each camera's trigger time after the first one's at this stop.
+    std::optional<std::chrono::steady_clock::time_point> first_trigger;
+    for (const auto& photo : photos) {
+      if (photo && photo->triggered_at != std::chrono::steady_clock::time_point{} &&
+          (!first_trigger || photo->triggered_at < *first_trigger))
+        first_trigger = photo->triggered_at;
+    }
+    double skew_ms = 0.0;
+    for (std::size_t i = 0; i < to_take.size(); ++i) {
+      if (!photos[i] || !first_trigger ||
+          photos[i]->triggered_at == std::chrono::steady_clock::time_point{})
+        continue;
+      to_take[i].trigger_offset_ms =
+          std::chrono::duration<double, std::milli>(photos[i]->triggered_at - *first_trigger)
+              .count();
+      skew_ms = std::max(skew_ms, to_take[i].trigger_offset_ms);
+    }
+    result.max_trigger_skew_ms = std::max(result.max_trigger_skew_ms, skew_ms);
+    if (to_take.size() > 1)
+      CAROUSEL_LOG_INFO("stop " << stop << ": " << to_take.size() << " cameras triggered within "
+                                << skew_ms << " ms");
     // The table turns to the next stop while the photos download.
     if (!error && stop + 1 < plan.stops) {
       rig.turntable->StartMoveTo(angle_of(stop + 1));
@@ -328,31 +348,20 @@ RunResult Continue(const std::filesystem::path& folder, const RunOptions& option
   progress.EndStage();
   result.seconds_capture = watch.ElapsedSeconds();
 
-  // ---- reconstruct, texture: skipped when current
-  // ------------------------------------------------
-  session = ReadSession(folder);
-  bool masks_present = true;
-  for (const SessionView& view : session.views)
-    masks_present =
-        masks_present && !view.mask.empty() && std::filesystem::exists(folder / view.mask);
-  if (session.stages["reconstruct"] != "done" || !masks_present ||
-      !std::filesystem::exists(folder / "recon" / "mesh.ply")) {
-    watch = Stopwatch();
-    ReconstructSession(folder, options.reconstruct, progress);
-    result.reconstructed = true;
-    result.seconds_reconstruct = watch.ElapsedSeconds();
-    session = ReadSession(folder);
-    session.stages.erase("texture");
-    WriteSessionManifest(folder, session);
+  // ---- reconstruct, texture: each skipped when current (pipeline.h) ----------------------
+  ReconstructOptions reconstruct = options.reconstruct;
+  if (options.hardware) {
+    reconstruct.silhouettes.method = options.hardware->backdrop == "difference"
+                                         ? recon::SilhouetteMethod::kDifference
+                                         : recon::SilhouetteMethod::kKey;
   }
-  if (session.stages["texture"] != "done" ||
-      !std::filesystem::exists(folder / "model" / "model.glb") ||
-      !std::filesystem::exists(folder / "model" / "model.obj")) {
-    watch = Stopwatch();
-    result.texture = TextureSession(folder, options.texture, progress);
-    result.textured = true;
-    result.seconds_texture = watch.ElapsedSeconds();
-  }
+  const ProcessResult processed =
+      ProcessSession(folder, {.reconstruct = reconstruct, .texture = options.texture}, progress);
+  result.reconstructed = processed.reconstruct.has_value();
+  result.textured = processed.texture.has_value();
+  if (processed.texture) result.texture = *processed.texture;
+  result.seconds_reconstruct = processed.seconds_reconstruct;
+  result.seconds_texture = processed.seconds_texture;
   return result;
 }
 
@@ -385,32 +394,6 @@ std::string SessionNameForProduct(const std::string& product) {
   return name;
 }
 
-std::string FileSha256(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw IoError(path, "cannot be read");
-  std::unique_ptr<EVP_MD_CTX, decltype(&EVP_MD_CTX_free)> context(EVP_MD_CTX_new(),
-                                                                  &EVP_MD_CTX_free);
-  if (!context || EVP_DigestInit_ex(context.get(), EVP_sha256(), nullptr) != 1)
-    throw IoError(path, "SHA-256 unavailable");
-  std::array<char, 1 << 16> buffer{};
-  while (in) {
-    in.read(buffer.data(), buffer.size());
-    if (in.gcount() > 0)
-      EVP_DigestUpdate(context.get(), buffer.data(), static_cast<std::size_t>(in.gcount()));
-  }
-  if (in.bad()) throw IoError(path, "read error");
-  std::array<unsigned char, EVP_MAX_MD_SIZE> digest{};
-  unsigned int size = 0;
-  EVP_DigestFinal_ex(context.get(), digest.data(), &size);
-  static constexpr char kHex[] = "0123456789abcdef";
-  std::string hex;
-  for (unsigned int i = 0; i < size; ++i) {
-    hex.push_back(kHex[digest[i] >> 4]);
-    hex.push_back(kHex[digest[i] & 15]);
-  }
-  return hex;
-}
-
 RunResult RunSession(const RunOptions& options, Progress& progress) {
   options.Validate();
   const std::filesystem::path folder = options.out / SessionNameForProduct(options.product);
@@ -435,15 +418,39 @@ RunResult RunSession(const RunOptions& options, Progress& progress) {
     std::filesystem::rename(folder, aside);
     CAROUSEL_LOG_INFO("kept the previous session as " << aside);
   }
-  std::filesystem::create_directories(folder / "images", ec);
-  if (ec) throw IoError(folder, "cannot create the session folder: " + ec.message());
-  WriteFileAtomic(folder / kRunFile, RunToJson(options).dump(2));
-  Session session;
-  session.product = options.product;
-  session.created_utc = NowUtc();
-  session.source = options.hardware ? "rig" : "sim:" + options.sim.scene;
-  session.frame = "turntable";
-  WriteSessionManifest(folder, session);
+  // The folder appears complete with run.json and session.json, or not at all: a kill before
+  // the rename leaves only a hidden staging folder, never a session `--resume` cannot read.
+  std::filesystem::create_directories(options.out, ec);
+  if (ec) throw IoError(options.out, "cannot create the sessions folder: " + ec.message());
+  {
+    StagedSessionFolder staged(folder, false);
+    staged.CreateFolder("images");
+    WriteFileAtomic(staged.staging() / kRunFile, RunToJson(options).dump(2));
+    Session session;
+    session.product = options.product;
+    session.created_utc = NowUtc();
+    session.source = options.hardware ? "rig" : "sim:" + options.sim.scene;
+    session.frame = "turntable";
+    WriteSessionManifest(staged.staging(), session);
+    if (options.hardware && options.hardware->backdrop == "difference") {
+      // The rig's background plates travel with the session (the difference method reads them).
+      staged.CreateFolder("backgrounds");
+      for (std::size_t c = 0; c < options.hardware->cameras.size(); ++c) {
+        const std::string stem = "cam" + std::to_string(c);
+        std::filesystem::path plate = options.hardware->backgrounds / (stem + ".jpg");
+        if (!std::filesystem::is_regular_file(plate))
+          plate = options.hardware->backgrounds / (stem + ".png");
+        if (!std::filesystem::is_regular_file(plate))
+          throw IoError(options.hardware->backgrounds / (stem + ".jpg"),
+                        "no background plate for camera " + std::to_string(c) +
+                            " (the rig's backdrop is \"difference\")");
+        const std::vector<std::uint8_t> bytes = ReadFileBytes(plate);
+        WriteFileAtomic(staged.staging() / "backgrounds" / (stem + plate.extension().string()),
+                        bytes);
+      }
+    }
+    staged.Commit();
+  }
   return Continue(folder, options, rig, progress);
 }
 

@@ -175,6 +175,7 @@ void WriteSessionManifest(const std::filesystem::path& folder, const Session& se
                   {"camera_model", CameraToJson(view.camera_model)}};
     if (!view.mask.empty()) entry["mask"] = view.mask;
     if (!view.sha256.empty()) entry["sha256"] = view.sha256;
+    if (view.trigger_offset_ms >= 0) entry["trigger_offset_ms"] = view.trigger_offset_ms;
     views.push_back(entry);
   }
   json manifest = {{"format", "carousel-session"},
@@ -185,6 +186,7 @@ void WriteSessionManifest(const std::filesystem::path& folder, const Session& se
                    {"frame", session.frame},
                    {"views", views},
                    {"stages", session.stages}};
+  if (!session.stage_inputs.empty()) manifest["stage_inputs"] = session.stage_inputs;
   if (!session.ground_truth.empty()) {
     manifest["ground_truth"] = {{"mesh", session.ground_truth.mesh},
                                 {"masks", session.ground_truth.masks},
@@ -230,6 +232,8 @@ Session ReadSession(const std::filesystem::path& folder) {
     view.mask = read.RelativePath(views[i], "mask", where, false);
     if (views[i].contains("sha256") && views[i]["sha256"].is_string())
       view.sha256 = views[i]["sha256"].get<std::string>();
+    if (views[i].contains("trigger_offset_ms"))
+      view.trigger_offset_ms = read.Number(views[i], "trigger_offset_ms", where);
     view.camera = read.Integer(views[i], "camera", where);
     view.stop = read.Integer(views[i], "stop", where);
     view.table_angle_deg = read.Number(views[i], "table_angle_deg", where);
@@ -243,6 +247,14 @@ Session ReadSession(const std::filesystem::path& folder) {
     for (const auto& [name, state] : stages.items()) {
       if (!state.is_string()) read.Fail("manifest.stages." + name + " is not a string");
       session.stages[name] = state.get<std::string>();
+    }
+  }
+  if (manifest.contains("stage_inputs")) {
+    const json& inputs = manifest["stage_inputs"];
+    if (!inputs.is_object()) read.Fail("manifest.stage_inputs is not an object");
+    for (const auto& [name, fingerprint] : inputs.items()) {
+      if (!fingerprint.is_string()) read.Fail("manifest.stage_inputs." + name + " is not a string");
+      session.stage_inputs[name] = fingerprint.get<std::string>();
     }
   }
   if (manifest.contains("ground_truth")) {

@@ -5,6 +5,7 @@
 // simulated motor has actually turned to.
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <atomic>
 #include <cmath>
@@ -232,6 +233,26 @@ TEST(RigConfigTest, MalformedRigFilesNameTheFieldAndTheFile) {
                                     "\"cameras\": [{\"port\": \"usb:001,002\"}]}"));
   EXPECT_THAT([&] { ReadRigConfig(file); },
               ::testing::ThrowsMessage<FormatError>(HasSubstr("cameras[0] has no calibration")));
+  // The backdrop chooses the silhouette method; differencing needs the plates.
+  const std::string rig =
+      "{\"format\": \"carousel-rig\", \"version\": 1, \"turntable\": {\"port\": \"/dev/ttyACM0\"}, "
+      "\"cameras\": [{\"port\": \"usb:001,002\", \"calibration\": " +
+      CameraModelToJson(sim::MakeSimRig({}, Eigen::AlignedBox3d(Eigen::Vector3d(-0.1, -0.1, 0),
+                                                                Eigen::Vector3d(0.1, 0.1, 0.2)))
+                            .front())
+          .dump() +
+      "}]";
+  WriteFileAtomic(file, rig + ", \"backdrop\": \"chroma\"}");
+  EXPECT_THAT([&] { ReadRigConfig(file); },
+              ::testing::ThrowsMessage<FormatError>(HasSubstr("backdrop must be")));
+  WriteFileAtomic(file, rig + ", \"backdrop\": \"difference\"}");
+  EXPECT_THAT([&] { ReadRigConfig(file); },
+              ::testing::ThrowsMessage<FormatError>(HasSubstr("needs \"backgrounds\"")));
+  WriteFileAtomic(file, rig + ", \"backdrop\": \"difference\", \"backgrounds\": \"plates\"}");
+  const RigConfig config = ReadRigConfig(file);
+  EXPECT_EQ(config.backdrop, "difference");
+  EXPECT_EQ(config.backgrounds, dir / "plates");  // relative to the rig file
+  EXPECT_EQ(ReadRigConfig(file).cameras.size(), 1u);
   WriteFileAtomic(file, std::string("{\"version\": 2}"));
   EXPECT_THROW(ReadRigConfig(file), FormatError);
   EXPECT_THROW(ReadRigConfig(dir / "none.json"), IoError);

@@ -15,14 +15,18 @@
 
 #include <chrono>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <random>
 #include <set>
+#include <sstream>
 #include <thread>
 
 #include "carousel/core/error.h"
+#include "carousel/core/mesh_io.h"
 #include "carousel/core/timer.h"
 #include "carousel/studio/cli.h"
+#include "carousel/studio/pipeline.h"
 #include "carousel/studio/session.h"
 #include "carousel/testing/testing.h"
 
@@ -109,20 +113,54 @@ TEST(RunSessionTest, ResumesAfterSigkillAtTenMomentsWithTheSamePhotosAndNoDuplic
 
   std::mt19937 random(20261201);
   std::uniform_real_distribution<double> jitter(0.0, 1.0);
-  int during_capture = 0, after_capture = 0;
+  // Where each kill landed, judged from what the session held afterwards.
+  std::map<std::string, int> landed;
+  const auto count_files = [](const std::filesystem::path& folder) {
+    std::error_code ec;
+    int n = 0;
+    for (auto it = std::filesystem::directory_iterator(folder, ec);
+         !ec && it != std::filesystem::directory_iterator(); it.increment(ec))
+      ++n;
+    return n;
+  };
+  const auto manifest_has = [](const std::filesystem::path& session, const char* text) {
+    std::ifstream in(session / kManifestName);
+    const std::string manifest((std::istreambuf_iterator<char>(in)), {});
+    return manifest.find(text) != std::string::npos;
+  };
   for (int k = 0; k < 10; ++k) {
     const auto out = dir / ("run" + std::to_string(k));
     const auto session = out / "kill-test";
+    // Each kill waits for a moment of the run (start-up, photos on disk, masks being written,
+    // the hull, the mesh, the texture stage under way), then strikes after a random delay.
+    const std::function<bool()> moment[10] = {
+        [] { return true; },
+        [&] { return count_files(session / "images") >= 1; },
+        [&] { return count_files(session / "images") >= 3; },
+        [&] { return count_files(session / "images") >= 5; },
+        [&] { return count_files(session / "masks") >= 1; },
+        [&] { return count_files(session / "masks") >= 4; },
+        [&] { return std::filesystem::exists(session / "recon" / "hull.ply"); },
+        [&] { return std::filesystem::exists(session / "recon" / "mesh.ply"); },
+        [&] { return manifest_has(session, "stage_inputs"); },
+        [&] { return count_files(session / "model") >= 1; }};
     const pid_t pid = Spawn(RunArgs(out, true));
-    // Stratified: kill k falls in the k-th tenth of a run.
-    std::this_thread::sleep_for(
-        std::chrono::duration<double>((k + jitter(random)) / 10.0 * seconds));
+    Stopwatch waited;
+    while (!moment[k]() && waited.ElapsedSeconds() < 2.0 * seconds + 10.0) {
+      std::this_thread::sleep_for(std::chrono::microseconds(500));
+    }
+    std::this_thread::sleep_for(std::chrono::duration<double>(jitter(random) * 0.02 * seconds));
     kill(pid, SIGKILL);
     Wait(pid);
     const std::map<std::string, std::string> before = Recorded(session);
     const Session at_kill =
         std::filesystem::exists(session / kManifestName) ? ReadSession(session) : Session();
-    (at_kill.stages.count("capture") != 0 ? after_capture : during_capture) += 1;
+    const std::string phase = !std::filesystem::exists(session / kManifestName) ? "start-up"
+                              : at_kill.stages.count("capture") == 0            ? "capture"
+                              : at_kill.stage_inputs.count("reconstruct") == 0  ? "reconstruct"
+                              : at_kill.stage_inputs.count("texture") == 0      ? "texture"
+                                                                                : "finished";
+    ++landed[phase];
     if (!std::filesystem::exists(session / "run.json")) {
       // Killed before the session existed: a new run starts it.
       ASSERT_EQ(Wait(Spawn(RunArgs(out, true))), 0) << "kill " << k;
@@ -153,13 +191,67 @@ TEST(RunSessionTest, ResumesAfterSigkillAtTenMomentsWithTheSamePhotosAndNoDuplic
     for (const char* name :
          {"model/model.obj", "model/model.png", "model/model.glb", "recon/mesh.ply"})
       EXPECT_TRUE(std::filesystem::exists(session / name)) << "kill " << k << ": " << name;
-    std::printf("kill %d at %.0f %% of a run: %zu photos recorded, stages %s%s\n", k,
-                100.0 * (k + 0.5) / 10.0, before.size(),
-                at_kill.stages.count("capture") ? "capture" : "-",
-                at_kill.stages.count("reconstruct") ? "+reconstruct" : "");
+    std::printf("kill %d: during %s, %zu photos recorded\n", k, phase.c_str(), before.size());
+    // Nothing but the session (and hidden staging left by a kill) in the output folder.
+    for (const auto& entry : std::filesystem::directory_iterator(out)) {
+      const std::string name = entry.path().filename().string();
+      EXPECT_TRUE(name == "kill-test" || name.rfind(".kill-test.partial-", 0) == 0) << name;
+    }
   }
-  EXPECT_GE(during_capture, 1);
-  EXPECT_GE(after_capture, 3);
+  // Every part of a run was hit: capture (and its downloads), reconstruct and texture.
+  EXPECT_GE(landed["capture"], 1);
+  EXPECT_GE(landed["reconstruct"], 1);
+  EXPECT_GE(landed["texture"], 1);
+}
+
+// `carousel process`: each stage skipped when current, rerun when its inputs or options change;
+// a batch goes on past a session that fails and reports it.
+TEST(RunSessionTest, ProcessSkipsCurrentStagesAndRunsABatchPastAFailure) {
+  TempDir dir;
+  ASSERT_EQ(Wait(Spawn(RunArgs(dir.path(), true))), 0);
+  const auto session = dir.path() / "kill-test";
+  const auto run = [](const std::vector<std::string>& args, std::string* out_text) {
+    std::vector<std::string> all = {"carousel", "--log-level", "off", "process"};
+    all.insert(all.end(), args.begin(), args.end());
+    std::vector<const char*> argv;
+    for (const auto& a : all) argv.push_back(a.c_str());
+    std::ostringstream out, err;
+    const int code = RunCli(static_cast<int>(argv.size()), argv.data(), out, err);
+    *out_text = out.str() + err.str();
+    return code;
+  };
+  std::string text;
+  // The one-button run recorded its stages' inputs: nothing to do.
+  const auto mesh_time = std::filesystem::last_write_time(session / "recon" / "mesh.ply");
+  EXPECT_EQ(run({session.string()}, &text), 0) << text;
+  EXPECT_THAT(text, ::testing::HasSubstr("reconstruct: current, skipped"));
+  EXPECT_THAT(text, ::testing::HasSubstr("texture: current, skipped"));
+  EXPECT_EQ(std::filesystem::last_write_time(session / "recon" / "mesh.ply"), mesh_time);
+  // Another face count: both stages again.
+  EXPECT_EQ(run({"--faces", "2000", session.string()}, &text), 0) << text;
+  EXPECT_THAT(text, ::testing::HasSubstr("mesh " + (session / "recon/mesh.ply").string()));
+  EXPECT_THAT(text, ::testing::Not(::testing::HasSubstr("skipped")));
+  EXPECT_NEAR(static_cast<double>(ReadMesh(session / "recon" / "mesh.ply").n_faces()), 2000.0,
+              20.0);
+  // The texture alone goes stale when its model files go.
+  std::filesystem::remove(session / "model" / "model.glb");
+  EXPECT_EQ(run({"--faces", "2000", session.string()}, &text), 0) << text;
+  EXPECT_THAT(text, ::testing::HasSubstr("reconstruct: current, skipped"));
+  EXPECT_THAT(text, ::testing::Not(::testing::HasSubstr("texture: current")));
+  EXPECT_TRUE(std::filesystem::exists(session / "model" / "model.glb"));
+  // A recalibrated camera makes the reconstruction stale.
+  Session manifest = ReadSession(session);
+  manifest.views[0].camera_model.fx *= 1.001;
+  WriteSessionManifest(session, manifest);
+  EXPECT_NE(ReconstructFingerprint(session, {.mesh = {.target_faces = 2000}}),
+            ReadSession(session).stage_inputs.at("reconstruct"));
+  // A batch: a missing session fails with its name, the next one is still processed.
+  EXPECT_EQ(run({"--faces", "2000", (dir / "nowhere").string(), session.string()}, &text),
+            kExitIoError)
+      << text;
+  EXPECT_THAT(text, ::testing::HasSubstr((dir / "nowhere").string()));
+  EXPECT_THAT(text, ::testing::HasSubstr("1 of 2 sessions processed, 1 failed"));
+  EXPECT_THAT(text, ::testing::HasSubstr("mesh " + (session / "recon/mesh.ply").string()));
 }
 
 TEST(RunSessionTest, ResumeRetakesMissingAndDamagedPhotosAndKeepsTheDamagedCopy) {

@@ -14,7 +14,9 @@
 //     "capture": {"stops": 16, "settle_ms": 300, "delete_from_camera": true,
 //                 "shutter": "camera" | "controller", "shutter_pulse_ms": 100,
 //                 "move_timeout_s": 60, "camera_timeout_s": 60},
-//     "backdrop": "white"
+//     "backdrop": "key" | "difference",   (how silhouettes are found; default key)
+//     "backgrounds": "plates/"             (difference: cam<C>.jpg, the empty turntable
+//                                           photographed by camera C; relative to the file)
 //   }
 #pragma once
 
@@ -63,7 +65,12 @@ struct RigConfig {
   RigTurntableConfig turntable;
   std::vector<RigCameraConfig> cameras;
   CapturePlan capture;
-  std::string backdrop = "white";
+  // How the silhouettes are found: "key" (keying against the backdrop) or "difference"
+  // (differencing against background plates of the empty turntable, one per camera).
+  std::string backdrop = "key";
+  // With "difference": the folder holding cam<C>.jpg (or .png) per camera; a session copies
+  // them into its backgrounds/ folder when it starts.
+  std::filesystem::path backgrounds;
   void Validate() const;
 };
 

@@ -20,6 +20,7 @@
 #include <string>
 
 #include "carousel/core/progress.h"
+#include "carousel/studio/checksum.h"
 #include "carousel/studio/reconstruct.h"
 #include "carousel/studio/rig_config.h"
 #include "carousel/studio/sim_capture.h"
@@ -40,10 +41,11 @@ struct RunOptions {
 
 struct RunResult {
   std::filesystem::path session;
-  int photos_taken = 0;                          // this run
-  int photos_kept = 0;                           // verified from an earlier run
-  int photos_adopted = 0;                        // complete on disk but not yet recorded
-  int photos_retaken = 0;                        // damaged or missing: moved aside and taken again
+  int photos_taken = 0;              // this run
+  int photos_kept = 0;               // verified from an earlier run
+  int photos_adopted = 0;            // complete on disk but not yet recorded
+  int photos_retaken = 0;            // damaged or missing: moved aside and taken again
+  double max_trigger_skew_ms = 0.0;  // largest spread of the cameras' triggers at a stop
   bool reconstructed = false, textured = false;  // stages run (not skipped) this time
   TextureSessionResult texture;
   double seconds_capture = 0.0, seconds_reconstruct = 0.0, seconds_texture = 0.0;
@@ -60,8 +62,5 @@ RunResult RunSession(const RunOptions& options, Progress& progress);
 // Continues a session started by RunSession. \throw IoError/FormatError naming run.json or
 // session.json, and what the stages throw.
 RunResult ResumeSession(const std::filesystem::path& session, Progress& progress);
-
-// SHA-256 of a file, lowercase hex. \throw IoError.
-std::string FileSha256(const std::filesystem::path& path);
 
 }  // namespace carousel::studio

@@ -37,6 +37,9 @@ struct SessionView {
   double table_angle_deg = 0.0;  // table angle at capture
   CameraModel camera_model;      // exact calibration, cam_from_world at this angle
   std::string sha256;            // of the photo as downloaded (empty: not recorded)
+  // When the shutter was triggered, milliseconds after the first camera's trigger at this
+  // stop (the trigger skew between cameras); < 0 when unknown.
+  double trigger_offset_ms = -1.0;
 };
 
 struct GroundTruth {
@@ -56,6 +59,8 @@ struct Session {
   std::vector<SessionView> views;
   GroundTruth ground_truth;
   std::map<std::string, std::string> stages;  // stage name -> state ("done", ...)
+  // stage name -> fingerprint of the inputs it ran on (pipeline.h), recorded after it finished
+  std::map<std::string, std::string> stage_inputs;
 };
 
 // Reads <folder>/session.json. \throw IoError (missing) or FormatError (malformed JSON, missing

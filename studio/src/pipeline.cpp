@@ -1,0 +1,192 @@
+#include "carousel/studio/pipeline.h"
+
+#include <iomanip>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+#include "carousel/core/error.h"
+#include "carousel/core/logging.h"
+#include "carousel/core/timer.h"
+#include "carousel/studio/checksum.h"
+#include "carousel/studio/session.h"
+
+namespace carousel::studio {
+namespace {
+
+constexpr const char* kReconstruct = "reconstruct";
+constexpr const char* kTexture = "texture";
+
+// Writes "name=value;" with doubles at full precision, so any change of a value shows.
+class Describer {
+ public:
+  template <typename T>
+  Describer& operator()(const char* name, const T& value) {
+    out_ << name << '=' << value << ';';
+    return *this;
+  }
+  Describer& operator()(const char* name, double value) {
+    out_ << name << '=' << std::setprecision(17) << value << ';';
+    return *this;
+  }
+  Describer& operator()(const char* name, bool value) {
+    out_ << name << '=' << (value ? 1 : 0) << ';';
+    return *this;
+  }
+  std::string str() const { return out_.str(); }
+
+ private:
+  std::ostringstream out_;
+};
+
+// Every option that changes what the stage produces (thread counts do not).
+std::string Describe(const ReconstructOptions& o) {
+  const recon::SilhouetteOptions& s = o.silhouettes;
+  const recon::VisualHullOptions& h = o.hull;
+  const recon::MeshOptimizationOptions& m = o.mesh;
+  return Describer()("method", static_cast<int>(s.method))("noise", s.noise_threshold)(
+             "chroma", s.chroma_threshold)("shadow", s.min_shadow_brightness)(
+             "highlight", s.max_highlight_brightness)("plate", s.plate_radius_m)(
+             "rim_m", s.plate_rim_m)("rim_px", s.plate_rim_px)("refine", s.refine_boundary)(
+             "component", s.min_component_fraction)("hole", s.max_hole_fraction)(
+             "voxel", h.voxel_size_m)("resolution", h.resolution)("voxel_px", h.voxel_px)(
+             "max_resolution", h.max_resolution)("floor", h.use_floor)("floor_z", h.floor_z_m)(
+             "consistency", h.min_view_consistency)("cells", h.max_surface_cells)(
+             "proxy", h.proxy_max_faces)("faces", m.target_faces)("smooth", m.smoothing_iterations)(
+             "lambda", m.taubin_lambda)("mu", m.taubin_mu)("remesh", m.remesh)(
+             "remesh_iterations", m.remesh_iterations)("remesh_factor", m.remesh_face_factor)(
+             "normal", m.max_normal_deviation_deg)("aspect", m.max_aspect_ratio)(
+             "volume", m.target_volume_m3)
+      .str();
+}
+
+std::string Describe(const TextureSessionOptions& o) {
+  const texture::ChartOptions& c = o.atlas.charts;
+  const texture::ParameterizationOptions& p = o.atlas.parameterization;
+  const texture::PackingOptions& k = o.atlas.packing;
+  const texture::GroupingOptions& g = o.grouping;
+  const texture::TransferOptions& t = o.transfer;
+  const texture::ExportOptions& e = o.output;
+  std::ostringstream excluded;
+  for (const int v : g.exclude_views) excluded << v << ',';
+  return Describer()("seeds", c.seeds)("faces_per_seed", c.faces_per_seed)(
+             "normal", c.max_normal_deviation_deg)("compactness", c.compactness)(
+             "chart_iterations", c.max_iterations)("random", c.random_seed)(
+             "abf_iterations", p.max_abf_iterations)("abf_tolerance", p.abf_tolerance)(
+             "split", p.max_split_depth)("stretch", p.max_chart_stretch)(
+             "packing", static_cast<int>(k.mode))("atlas_size", k.size)("gutter", k.gutter_texels)(
+             "exclude", excluded.str())("correction", g.correction)("island", g.max_island_faces)(
+             "zbuffer", g.zbuffer_max_side)("transfer_size", t.size)("blend", t.blend)(
+             "gain", t.gain)("transfer_correction", t.correction)("dilation", t.dilation_texels)(
+             "name", e.name)("glb", e.glb)("jpeg", e.jpeg_in_glb)("jpeg_quality", e.jpeg_quality)(
+             "png", e.png_compression)("size", o.size)("max_size", o.max_size)(
+             "coverage", o.density_coverage)
+      .str();
+}
+
+bool AllExist(const std::filesystem::path& folder, const std::vector<std::string>& files) {
+  for (const std::string& f : files) {
+    if (!std::filesystem::is_regular_file(folder / f)) return false;
+  }
+  return true;
+}
+
+// Why `stage` must run ("" = it is current).
+std::string Staleness(const Session& session, const char* stage, const std::string& fingerprint,
+                      bool outputs_present) {
+  const auto done = session.stages.find(stage);
+  if (done == session.stages.end() || done->second != "done") return "not done yet";
+  if (!outputs_present) return "outputs missing";
+  const auto recorded = session.stage_inputs.find(stage);
+  if (recorded == session.stage_inputs.end()) return "inputs not recorded";
+  if (recorded->second != fingerprint) return "inputs or options changed";
+  return "";
+}
+
+void RecordInputs(const std::filesystem::path& folder, const char* stage,
+                  const std::string& fingerprint) {
+  Session session = ReadSession(folder);
+  session.stage_inputs[stage] = fingerprint;
+  WriteSessionManifest(folder, session);
+}
+
+}  // namespace
+
+void ProcessOptions::Validate() const {
+  reconstruct.Validate();
+  texture.Validate();
+}
+
+std::string ReconstructFingerprint(const std::filesystem::path& folder,
+                                   const ReconstructOptions& options) {
+  const Session session = ReadSession(folder);
+  std::ostringstream inputs;
+  inputs << "frame=" << session.frame << '\n';
+  for (const SessionView& view : session.views) {
+    // Photos are never rewritten: a recorded checksum stands for the file; imported sessions
+    // have none and are hashed here.
+    const std::string sha =
+        view.sha256.empty() ? FileSha256(folder / view.image) : view.sha256;
+    inputs << view.image << ' ' << sha << ' ' << std::setprecision(17) << view.table_angle_deg
+           << ' ' << CameraModelToJson(view.camera_model).dump() << '\n';
+  }
+  inputs << Describe(options);
+  return Sha256(inputs.str());
+}
+
+std::string TextureFingerprint(const std::filesystem::path& folder,
+                               const std::string& reconstruct_fingerprint,
+                               const TextureSessionOptions& options) {
+  return Sha256(reconstruct_fingerprint + '\n' + FileSha256(folder / "recon" / "mesh.ply") +
+                '\n' + Describe(options));
+}
+
+ProcessResult ProcessSession(const std::filesystem::path& folder, const ProcessOptions& options,
+                             Progress& progress) {
+  options.Validate();
+  ProcessResult result;
+  Session session = ReadSession(folder);
+
+  const std::string recon_inputs = ReconstructFingerprint(folder, options.reconstruct);
+  bool masks_present = true;
+  for (const SessionView& view : session.views) {
+    masks_present = masks_present && !view.mask.empty() &&
+                    std::filesystem::is_regular_file(folder / view.mask);
+  }
+  result.reconstruct_reason =
+      options.force ? "forced"
+                    : Staleness(session, kReconstruct, recon_inputs,
+                                masks_present && AllExist(folder, {"recon/hull.ply", "recon/mesh.ply"}));
+  if (!result.reconstruct_reason.empty()) {
+    CAROUSEL_LOG_INFO(folder.string() << ": reconstruct runs (" << result.reconstruct_reason
+                                      << ")");
+    Stopwatch watch;
+    result.reconstruct = ReconstructSession(folder, options.reconstruct, progress);
+    RecordInputs(folder, kReconstruct, recon_inputs);
+    result.seconds_reconstruct = watch.ElapsedSeconds();
+    session = ReadSession(folder);
+  } else {
+    result.reconstruct_reason = "current";
+  }
+
+  const std::string texture_inputs = TextureFingerprint(folder, recon_inputs, options.texture);
+  const std::string stem = "model/" + options.texture.output.name;
+  std::vector<std::string> outputs = {stem + ".obj", stem + ".mtl", stem + ".png"};
+  if (options.texture.output.glb) outputs.push_back(stem + ".glb");
+  result.texture_reason =
+      (options.force || result.reconstruct)
+          ? (options.force ? "forced" : "the reconstruction ran")
+          : Staleness(session, kTexture, texture_inputs, AllExist(folder, outputs));
+  if (!result.texture_reason.empty()) {
+    CAROUSEL_LOG_INFO(folder.string() << ": texture runs (" << result.texture_reason << ")");
+    Stopwatch watch;
+    result.texture = TextureSession(folder, options.texture, progress);
+    RecordInputs(folder, kTexture, texture_inputs);
+    result.seconds_texture = watch.ElapsedSeconds();
+  } else {
+    result.texture_reason = "current";
+  }
+  return result;
+}
+
+}  // namespace carousel::studio
