@@ -349,21 +349,29 @@ class GPhotoCamera::Impl : public std::enable_shared_from_this<GPhotoCamera::Imp
   // Runs `job` on the worker; waits until `deadline`. A job that has not started by then is
   // abandoned (it never runs); one that is running finishes in the background and leaves the
   // session marked for a reconnect.
+  // A job's lifecycle, shared by the caller and the worker.
+  struct JobState {
+    std::mutex mutex;
+    bool started = false;
+    bool abandoned = false;  // the caller gave up waiting
+    bool committed = false;  // the job has made its result visible (a photo under its name)
+  };
+
   template <typename R>
   R Run(std::function<R(Clock::time_point)> job, milliseconds timeout, const std::string& what) {
     const Clock::time_point deadline = Clock::now() + timeout;
-    struct State {
-      std::mutex mutex;
-      bool started = false;
-      bool abandoned = false;
-    };
-    auto state = std::make_shared<State>();
+    auto state = std::make_shared<JobState>();
     auto task = std::make_shared<std::packaged_task<R()>>([this, job, deadline, state] {
       {
         std::lock_guard<std::mutex> lock(state->mutex);
         if (state->abandoned) throw DeviceError(device_, "abandoned");
         state->started = true;
       }
+      running_job_ = state;
+      struct Clear {
+        Impl* impl;
+        ~Clear() { impl->running_job_.reset(); }
+      } clear{this};
       return job(deadline);
     });
     std::future<R> result = task->get_future();
@@ -374,11 +382,16 @@ class GPhotoCamera::Impl : public std::enable_shared_from_this<GPhotoCamera::Imp
     queue_cv_.notify_one();
     if (result.wait_until(deadline + milliseconds(250)) != std::future_status::ready) {
       bool running = false;
+      bool committed = false;
       {
         std::lock_guard<std::mutex> lock(state->mutex);
         state->abandoned = true;
         running = state->started;
+        committed = state->committed;
       }
+      // The result is already visible (a photo linked under its name): what is left is a
+      // folder sync, so report the outcome rather than a failure that did not happen.
+      if (committed) return result.get();
       if (running) needs_reconnect_ = true;
       throw DeviceError(device_, what + " did not finish within " +
                                      std::to_string(timeout.count()) + " ms" +
@@ -388,6 +401,15 @@ class GPhotoCamera::Impl : public std::enable_shared_from_this<GPhotoCamera::Imp
   }
 
   // ---- on the worker thread ----
+
+  // Marks the running job's result as visible; false when its caller has given up.
+  bool CommitRunningJob() {
+    if (!running_job_) return true;
+    std::lock_guard<std::mutex> lock(running_job_->mutex);
+    if (running_job_->abandoned) return false;
+    running_job_->committed = true;
+    return true;
+  }
 
   void Open(Clock::time_point deadline) {
     std::string model = options_.model;
@@ -666,6 +688,13 @@ class GPhotoCamera::Impl : public std::enable_shared_from_this<GPhotoCamera::Imp
       const bool synced = complete && ::fsync(fd) == 0;
       ::close(fd);
       if (synced) {
+        // A caller that gave up waiting has been told the download failed: the photo must not
+        // appear under its name afterwards.
+        if (!CommitRunningJob()) {
+          ::unlink(temporary.c_str());
+          throw DeviceError(Where(), "download of " + photo.camera_path +
+                                         " finished after its deadline; discarded");
+        }
         // link() never replaces a file that appeared meanwhile.
         const bool linked = ::link(temporary.c_str(), destination.c_str()) == 0;
         const int link_errno = errno;
@@ -849,6 +878,7 @@ class GPhotoCamera::Impl : public std::enable_shared_from_this<GPhotoCamera::Imp
   std::string serial_;
   CameraInfo info_;
   std::atomic<bool> needs_reconnect_{false};
+  std::shared_ptr<JobState> running_job_;  // the worker's: the job it is running
   Clock::time_point external_armed_at_{};  // the worker's: when PrepareExternalRelease ran
   // The worker writes them; Counters() reads them without waiting for the worker.
   mutable std::mutex counters_mutex_;

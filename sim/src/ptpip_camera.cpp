@@ -92,6 +92,7 @@ enum EventCode : std::uint16_t {
 
 enum Prop : std::uint16_t {
   kBatteryLevel = 0x5001,
+  kCompressionSetting = 0x5004,
   kWhiteBalance = 0x5005,
   kFNumber = 0x5007,
   kExposureTime = 0x500D,
@@ -309,6 +310,7 @@ class PtpIpCamera::Impl {
     capture_delay_ = options_.capture_delay;
     properties_[kBatteryLevel] = {0x0002, false, 100, 100, {}};
     properties_[kWhiteBalance] = {0x0004, true, 4, 4, {2, 4, 5, 6, 7}};
+    properties_[kCompressionSetting] = {0x0002, true, 2, 2, {0, 1, 2}};  // JPEG basic/normal/fine
     properties_[kFNumber] = {0x0004, true, 800, 800, {280, 400, 560, 800, 1100, 1600, 2200}};
     properties_[kExposureTime] = {
         0x0006, true, 80, 80, {10000, 5000, 2500, 1250, 666, 333, 166, 80, 40, 20, 10}};
@@ -366,6 +368,10 @@ class PtpIpCamera::Impl {
   void SetCaptureDelay(std::chrono::milliseconds delay) {
     std::lock_guard<std::mutex> lock(mutex_);
     capture_delay_ = std::max(delay, std::chrono::milliseconds(0));
+  }
+  void SetDownloadDelay(std::chrono::milliseconds per_chunk) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    download_delay_ = std::max(per_chunk, std::chrono::milliseconds(0));
   }
   void ReleaseShutter() {
     {
@@ -578,12 +584,15 @@ class PtpIpCamera::Impl {
     start.U64(size);
     WritePacket(cmd_fd_, kStartData, start.bytes());
     std::optional<std::uint64_t> drop_after;
+    std::chrono::milliseconds delay{0};
     if (object) {
       std::lock_guard<std::mutex> lock(mutex_);
       if (drop_after_) drop_after = *drop_after_;
+      delay = download_delay_;
     }
     std::size_t sent = 0;
     do {
+      if (delay.count() > 0) std::this_thread::sleep_for(delay);  // a slow link
       std::size_t n = std::min(kDataChunk, size - sent);
       const bool last = sent + n == size;
       if (drop_after && sent + n > *drop_after) {
@@ -971,6 +980,7 @@ class PtpIpCamera::Impl {
   int busy_ = 0;
   PtpIpEvents events_ = PtpIpEvents::kAll;
   std::chrono::milliseconds capture_delay_{0};
+  std::chrono::milliseconds download_delay_{0};
   std::vector<Clock::time_point> external_releases_;  // not yet taken
   std::optional<std::uint64_t> drop_after_;           // object bytes still to serve before the drop
   std::uint64_t drop_after_bytes_ = 0;
@@ -1012,6 +1022,9 @@ void PtpIpCamera::ReleaseShutter() { impl_->ReleaseShutter(); }
 void PtpIpCamera::SetEvents(PtpIpEvents events) { impl_->SetEvents(events); }
 void PtpIpCamera::SetCaptureDelay(std::chrono::milliseconds delay) {
   impl_->SetCaptureDelay(delay);
+}
+void PtpIpCamera::SetDownloadDelay(std::chrono::milliseconds per_chunk) {
+  impl_->SetDownloadDelay(per_chunk);
 }
 void PtpIpCamera::DropDuringDownloads(std::uint64_t after_bytes, int count) {
   impl_->DropDuringDownloads(after_bytes, count);

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <csignal>
 #include <iomanip>
+#include <mutex>
 #include <numbers>
 #include <thread>
 
@@ -25,6 +26,12 @@ std::chrono::milliseconds Millis(double seconds) {
   return std::chrono::milliseconds(static_cast<long long>(seconds * 1000));
 }
 
+void PrintDevice(const rig::UsbDevice& d, std::ostream& out) {
+  out << (d.kind == rig::UsbDeviceKind::kCamera ? "camera " : "serial ") << d.ids() << " "
+      << d.vendor << " " << d.description << " on port " << d.port_path;
+  if (d.kind == rig::UsbDeviceKind::kCamera) out << " (" << d.gphoto_port() << ")";
+}
+
 int List(std::ostream& out) {
   out << rig::GPhotoVersion() << '\n';
   const std::vector<rig::DetectedCamera> cameras = rig::DetectGPhotoCameras();
@@ -34,9 +41,8 @@ int List(std::ostream& out) {
     const std::vector<rig::UsbDevice> devices = rig::ListUsbDevices();
     out << "USB devices (libusb): " << devices.size() << '\n';
     for (const rig::UsbDevice& d : devices) {
-      out << "  " << (d.kind == rig::UsbDeviceKind::kCamera ? "camera " : "serial ") << d.ids()
-          << " " << d.vendor << " " << d.description << " on port " << d.port_path;
-      if (d.kind == rig::UsbDeviceKind::kCamera) out << " (" << d.gphoto_port() << ")";
+      out << "  ";
+      PrintDevice(d, out);
       out << '\n';
     }
   } catch (const DeviceError& e) {
@@ -47,14 +53,58 @@ int List(std::ostream& out) {
   return 0;
 }
 
+// Cameras and serial adapters arriving and leaving, as the studio sees them (hotplug events,
+// or listing the bus every second where libusb has no hotplug).
+int Watch(double seconds, std::ostream& out) {
+  std::mutex mutex;
+  rig::UsbMonitor monitor([&](const rig::UsbDevice& device, bool arrived) {
+    std::lock_guard<std::mutex> lock(mutex);
+    out << (arrived ? "arrived: " : "left: ");
+    PrintDevice(device, out);
+    out << std::endl;
+  });
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    switch (monitor.mode()) {
+      case rig::UsbMonitorMode::kHotplug:
+        out << "watching USB through libusb hotplug events";
+        break;
+      case rig::UsbMonitorMode::kPolling:
+        out << "watching USB by listing the bus every second (" << monitor.reason() << ")";
+        break;
+      case rig::UsbMonitorMode::kUnavailable:
+        out << "USB cannot be watched here: " << monitor.reason() << std::endl;
+        return 0;
+    }
+    out << "; " << monitor.initial().size() << " camera(s) and serial adapter(s) present"
+        << std::endl;
+    for (const rig::UsbDevice& d : monitor.initial()) {
+      out << "  ";
+      PrintDevice(d, out);
+      out << '\n';
+    }
+  }
+  g_stop = 0;
+  auto previous_int = std::signal(SIGINT, OnSimCameraStop);
+  auto previous_term = std::signal(SIGTERM, OnSimCameraStop);
+  const auto end = std::chrono::steady_clock::now() + Millis(seconds);
+  while (!g_stop && (seconds <= 0 || std::chrono::steady_clock::now() < end)) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  std::signal(SIGINT, previous_int);
+  std::signal(SIGTERM, previous_term);
+  return 0;
+}
+
 }  // namespace
 
 int RunCamera(const CameraArgs& args, std::ostream& out, std::ostream& err) {
   if (args.action == "list") return List(out);
+  if (args.action == "watch") return Watch(args.seconds, out);
   CAROUSEL_THROW_IF(
       args.action != "summary" && args.action != "config" && args.action != "capture",
       InvalidArgument,
-      "unknown camera action '" << args.action << "' (list, summary, config or capture)");
+      "unknown camera action '" << args.action << "' (list, watch, summary, config or capture)");
   CAROUSEL_THROW_IF(args.count < 1, InvalidArgument, "--count must be >= 1");
   rig::GPhotoCameraOptions options;
   options.port = args.port;
@@ -181,6 +231,8 @@ int RunSimCamera(const SimCameraArgs& args, std::ostream& out, std::ostream& /*e
       options);
   emulator.SetBusy(args.busy);
   emulator.SetEvents(events);
+  if (args.drop_after_bytes > 0) emulator.DropDuringDownloads(args.drop_after_bytes, 1 << 30);
+  emulator.SetDownloadDelay(std::chrono::milliseconds(args.download_delay_ms));
   out << "PTP/IP camera " << args.serial << " (" << args.scene << ", " << rig.width << "x"
       << rig.height << ") listening: --port " << emulator.gphoto_port()
       << " --camera \"PTP/IP Camera\"" << std::endl;

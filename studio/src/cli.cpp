@@ -619,7 +619,8 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
   CameraArgs camera_args;
   CLI::App* camera_command = app.add_subcommand(
       "camera", "list, inspect, configure and fire cameras (libgphoto2: USB or ptpip:)");
-  camera_command->add_option("action", camera_args.action, "list, summary, config or capture")
+  camera_command
+      ->add_option("action", camera_args.action, "list, watch, summary, config or capture")
       ->required();
   camera_command->add_option("--port", camera_args.port,
                              "libgphoto2 port: usb:BUS,DEV or ptpip:HOST:PORT:PORT "
@@ -635,6 +636,8 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
       ->capture_default_str();
   camera_command->add_flag("--delete", camera_args.delete_after,
                            "capture: delete each photo from the camera once saved");
+  camera_command->add_option("--seconds", camera_args.seconds,
+                             "watch: how long to watch, 0 = until Ctrl-C");
   camera_command->add_option("--timeout", camera_args.timeout_s, "per operation, seconds")
       ->capture_default_str();
 
@@ -667,6 +670,10 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
   sim_camera_command
       ->add_option("--events", sim_camera.events, "fault: all, added-only, complete-only or none")
       ->capture_default_str();
+  sim_camera_command->add_option("--drop-after", sim_camera.drop_after_bytes,
+                                 "fault: drop the connection this many bytes into every download");
+  sim_camera_command->add_option("--download-delay", sim_camera.download_delay_ms,
+                                 "fault: ms before each 256 KiB chunk of a download (slow link)");
   sim_camera_command->add_option("--seconds", sim_camera.seconds, "run time, 0 = until Ctrl-C")
       ->capture_default_str();
 

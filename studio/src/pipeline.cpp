@@ -55,8 +55,8 @@ std::string Describe(const ReconstructOptions& o) {
              "proxy", h.proxy_max_faces)("faces", m.target_faces)("smooth", m.smoothing_iterations)(
              "lambda", m.taubin_lambda)("mu", m.taubin_mu)("remesh", m.remesh)(
              "remesh_iterations", m.remesh_iterations)("remesh_factor", m.remesh_face_factor)(
-             "normal", m.max_normal_deviation_deg)("aspect", m.max_aspect_ratio)(
-             "volume", m.target_volume_m3)
+             "normal", m.max_normal_deviation_deg)("aspect", m.max_aspect_ratio)("volume",
+                                                                                 m.target_volume_m3)
       .str();
 }
 
@@ -79,8 +79,8 @@ std::string Describe(const TextureSessionOptions& o) {
              "zbuffer", g.zbuffer_max_side)("transfer_size", t.size)("blend", t.blend)(
              "gain", t.gain)("transfer_correction", t.correction)("dilation", t.dilation_texels)(
              "name", e.name)("glb", e.glb)("jpeg", e.jpeg_in_glb)("jpeg_quality", e.jpeg_quality)(
-             "png", e.png_compression)("size", o.size)("max_size", o.max_size)(
-             "coverage", o.density_coverage)
+             "png", e.png_compression)("size", o.size)("max_size", o.max_size)("coverage",
+                                                                               o.density_coverage)
       .str();
 }
 
@@ -125,8 +125,7 @@ std::string ReconstructFingerprint(const std::filesystem::path& folder,
   for (const SessionView& view : session.views) {
     // Photos are never rewritten: a recorded checksum stands for the file; imported sessions
     // have none and are hashed here.
-    const std::string sha =
-        view.sha256.empty() ? FileSha256(folder / view.image) : view.sha256;
+    const std::string sha = view.sha256.empty() ? FileSha256(folder / view.image) : view.sha256;
     inputs << view.image << ' ' << sha << ' ' << std::setprecision(17) << view.table_angle_deg
            << ' ' << CameraModelToJson(view.camera_model).dump() << '\n';
   }
@@ -137,8 +136,8 @@ std::string ReconstructFingerprint(const std::filesystem::path& folder,
 std::string TextureFingerprint(const std::filesystem::path& folder,
                                const std::string& reconstruct_fingerprint,
                                const TextureSessionOptions& options) {
-  return Sha256(reconstruct_fingerprint + '\n' + FileSha256(folder / "recon" / "mesh.ply") +
-                '\n' + Describe(options));
+  return Sha256(reconstruct_fingerprint + '\n' + FileSha256(folder / "recon" / "mesh.ply") + '\n' +
+                Describe(options));
 }
 
 ProcessResult ProcessSession(const std::filesystem::path& folder, const ProcessOptions& options,
@@ -150,16 +149,17 @@ ProcessResult ProcessSession(const std::filesystem::path& folder, const ProcessO
   const std::string recon_inputs = ReconstructFingerprint(folder, options.reconstruct);
   bool masks_present = true;
   for (const SessionView& view : session.views) {
-    masks_present = masks_present && !view.mask.empty() &&
-                    std::filesystem::is_regular_file(folder / view.mask);
+    masks_present =
+        masks_present && !view.mask.empty() && std::filesystem::is_regular_file(folder / view.mask);
   }
   result.reconstruct_reason =
-      options.force ? "forced"
-                    : Staleness(session, kReconstruct, recon_inputs,
-                                masks_present && AllExist(folder, {"recon/hull.ply", "recon/mesh.ply"}));
+      options.force
+          ? "forced"
+          : Staleness(session, kReconstruct, recon_inputs,
+                      masks_present && AllExist(folder, {"recon/hull.ply", "recon/mesh.ply"}));
   if (!result.reconstruct_reason.empty()) {
-    CAROUSEL_LOG_INFO(folder.string() << ": reconstruct runs (" << result.reconstruct_reason
-                                      << ")");
+    CAROUSEL_LOG_INFO(folder.string()
+                      << ": reconstruct runs (" << result.reconstruct_reason << ")");
     Stopwatch watch;
     result.reconstruct = ReconstructSession(folder, options.reconstruct, progress);
     RecordInputs(folder, kReconstruct, recon_inputs);

@@ -124,6 +124,30 @@ TEST_F(GPhotoTest, SettingsRoundTripThroughThePtpProperties) {
   EXPECT_EQ(values.at(0x500F), 400u);
   EXPECT_EQ(values.at(0x5007), 1100u);
 
+  // Shutter speed, white balance and image format (PTP ExposureTime, WhiteBalance and
+  // CompressionSetting, libgphoto2's imagequality) the same way.
+  camera.SetSetting(rig::kSettingShutterSpeed, "1/250", 10s);
+  camera.SetSetting(rig::kSettingWhiteBalance, "Tungsten", 10s);
+  const std::string quality = camera.Settings(10s)[rig::kSettingImageFormat];
+  ASSERT_FALSE(quality.empty()) << "no image format";
+  camera.SetSetting(rig::kSettingImageFormat, "Unknown value 0001", 10s);
+  settings = camera.Settings(10s);
+  EXPECT_EQ(settings[rig::kSettingShutterSpeed], "0.0040s");  // as libgphoto2 presents it
+  EXPECT_EQ(settings[rig::kSettingWhiteBalance], "Tungsten");
+  EXPECT_EQ(settings[rig::kSettingImageFormat], "Unknown value 0001");
+  EXPECT_EQ(emulator.PropertyValues().at(0x500D), 40u);  // 1/250 s in 0.1 ms
+  EXPECT_EQ(emulator.PropertyValues().at(0x5005), 6u);   // PTP white balance: tungsten
+  EXPECT_EQ(emulator.PropertyValues().at(0x5004), 1u);
+  // A generic PTP camera has no capture target (card/RAM is a Canon and Nikon setting):
+  // asking for one is a clear refusal naming the camera and the setting.
+  try {
+    camera.SetSetting(rig::kSettingCaptureTarget, "card", 10s);
+    FAIL() << "capture target on a generic camera";
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("capturetarget"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(emulator.gphoto_port()), std::string::npos) << e.what();
+  }
+
   // Values the camera does not offer, and unknown settings, are refused before the camera sees
   // them; the old values stay.
   EXPECT_THROW(camera.SetSetting(rig::kSettingIso, "333", 10s), InvalidArgument);
@@ -251,6 +275,44 @@ TEST_F(GPhotoTest, DroppedConnectionMidDownloadIsRetriedAfterAReconnect) {
   EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir_.path()), {}), 1);
   // The next capture goes through the new session.
   EXPECT_NO_THROW(camera.Capture(10s));
+}
+
+TEST_F(GPhotoTest, SlowDownloadPastItsDeadlineLeavesNoPhotoEvenWhenItFinishesLater) {
+  sim::PtpIpCamera emulator(RandomShutter(2'000'000));  // 8 chunks of 256 KiB
+  rig::GPhotoCamera camera(Options(emulator));
+  const rig::CapturedPhoto photo = camera.Capture(10s);
+  emulator.SetDownloadDelay(150ms);  // about 1.2 s for the photo
+  const auto start = Clock::now();
+  EXPECT_THROW(camera.Download(photo, dir_ / "late.jpg", false, 400ms), DeviceError);
+  EXPECT_LT(Clock::now() - start, 1s);
+  // The transfer goes on in the background and completes; its photo must not appear under the
+  // name whose download was reported failed, nor linger as a temporary file.
+  std::this_thread::sleep_for(2s);
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "late.jpg"));
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir_.path()), {}), 0);
+  // The photo is still on the camera: a retry with time enough gets it.
+  emulator.SetDownloadDelay(0ms);
+  camera.Download(photo, dir_ / "late.jpg", false, 10s);
+  EXPECT_EQ(ReadFileBytes(dir_ / "late.jpg"), emulator.Photos().back().bytes);
+}
+
+TEST_F(GPhotoTest, CameraThatDropsOffAndReappearsIsReconnected) {
+  auto emulator = std::make_unique<sim::PtpIpCamera>(RandomShutter(100'000),
+                                                     sim::PtpIpCameraOptions{.serial = "EMU7"});
+  const std::uint16_t port = emulator->port();
+  rig::GPhotoCamera camera(Options(*emulator));
+  camera.Download(camera.Capture(10s), dir_ / "before.jpg", true, 10s);
+  // Switched off (the process listening on the port is gone) ...
+  emulator.reset();
+  EXPECT_THROW(camera.Capture(2s), DeviceError);
+  // ... and on again at the same address: the same Camera object carries on.
+  emulator = std::make_unique<sim::PtpIpCamera>(
+      RandomShutter(100'000), sim::PtpIpCameraOptions{.serial = "EMU7", .port = port});
+  const rig::CapturedPhoto photo = camera.Capture(10s);
+  camera.Download(photo, dir_ / "after.jpg", true, 10s);
+  EXPECT_EQ(ReadFileBytes(dir_ / "after.jpg"), emulator->Photos().back().bytes);
+  EXPECT_GE(camera.Counters().reconnects, 1);
+  EXPECT_EQ(camera.Identify().serial, "EMU7");
 }
 
 TEST_F(GPhotoTest, CameraGoneForGoodIsADeviceErrorAndNoHalfPhotoIsLeft) {

@@ -12,7 +12,7 @@
 // the photos stay on its card.
 //
 // Faults for tests: Device Busy answers to InitiateCapture, missing events, a connection
-// dropped in the middle of a download, a slow capture.
+// dropped in the middle of a download, a slow capture, a slow download.
 #pragma once
 
 #include <chrono>
@@ -99,6 +99,8 @@ class PtpIpCamera {
   void SetBusy(int count);
   void SetEvents(PtpIpEvents events);
   void SetCaptureDelay(std::chrono::milliseconds delay);
+  // A slow link: waits this long before each 256 KiB chunk of an object download.
+  void SetDownloadDelay(std::chrono::milliseconds per_chunk);
   // Close both sockets once `after_bytes` bytes of an object download have been sent, for the
   // next `count` downloads (0 disarms).
   void DropDuringDownloads(std::uint64_t after_bytes, int count = 1);
