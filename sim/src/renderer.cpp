@@ -227,7 +227,10 @@ class TriangleSetup {
     return {0.5 * (a.cam + b.cam), 0.5f * (a.uv + b.uv), (0.5f * (a.normal + b.normal))};
   }
 
-  // True when the lens bends the edge (a, b) further than allowed from its straight image.
+  // True when the lens moves the edge's 3D midpoint further than allowed from where the
+  // rasteriser puts it (on the straight screen edge, at the perspective-correct parameter): the
+  // bend across the edge and the stretch along it (a radial edge is straight but stretched,
+  // which would shift the texture along it).
   // Computed in a canonical endpoint order: both triangles sharing the edge get the same answer.
   bool EdgeNeedsSplit(const Eigen::Vector3d& a_in, const Eigen::Vector3d& b_in) const {
     const bool swap =
@@ -239,8 +242,9 @@ class TriangleSetup {
     const Eigen::Vector2d ab = pb - pa;
     const double length = ab.norm();
     if (!(length > kMinSplitLengthPx) || !mid.allFinite()) return false;
-    const double distance =
-        std::abs(ab.x() * (mid.y() - pa.y()) - ab.y() * (mid.x() - pa.x())) / length;
+    // Perspective-correct interpolation reaches the 3D midpoint at t = z_b / (z_a + z_b).
+    const double t = b.z() / (a.z() + b.z());
+    const double distance = (mid - (pa + t * ab)).norm();
     return distance > options_.max_edge_error_px;
   }
 
