@@ -9,12 +9,9 @@
 namespace carousel {
 
 Eigen::Vector2d Distortion::Apply(const Eigen::Vector2d& xy) const {
-  const double x = xy.x();
-  const double y = xy.y();
-  const double r2 = x * x + y * y;
-  const double radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
-  return {x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
-          y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y};
+  Eigen::Vector2d distorted;
+  DistortNormalized(k1, k2, p1, p2, k3, xy.x(), xy.y(), &distorted.x(), &distorted.y());
+  return distorted;
 }
 
 Eigen::Vector2d Distortion::Apply(const Eigen::Vector2d& xy, Eigen::Matrix2d* jacobian) const {
@@ -30,8 +27,7 @@ Eigen::Vector2d Distortion::Apply(const Eigen::Vector2d& xy, Eigen::Matrix2d* ja
   (*jacobian)(0, 1) = x * dradial_dy + 2.0 * p1 * x + 2.0 * p2 * y;
   (*jacobian)(1, 0) = y * dradial_dx + 2.0 * p1 * x + 2.0 * p2 * y;
   (*jacobian)(1, 1) = radial + y * dradial_dy + 6.0 * p1 * y + 2.0 * p2 * x;
-  return {x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
-          y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y};
+  return Apply(xy);
 }
 
 std::optional<Eigen::Vector2d> Distortion::Remove(const Eigen::Vector2d& distorted_xy) const {

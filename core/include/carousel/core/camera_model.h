@@ -17,6 +17,17 @@
 
 namespace carousel {
 
+// OpenCV's lens distortion of undistorted normalised coordinates (x, y) -> (*xd, *yd), for any
+// scalar type (calibration differentiates it automatically with Ceres' Jets).
+template <typename T>
+void DistortNormalized(const T& k1, const T& k2, const T& p1, const T& p2, const T& k3, const T& x,
+                       const T& y, T* xd, T* yd) {
+  const T r2 = x * x + y * y;
+  const T radial = T(1.0) + r2 * (k1 + r2 * (k2 + r2 * k3));
+  *xd = x * radial + T(2.0) * p1 * x * y + p2 * (r2 + T(2.0) * x * x);
+  *yd = y * radial + p1 * (r2 + T(2.0) * y * y) + T(2.0) * p2 * x * y;
+}
+
 // OpenCV's distortion coefficients, in OpenCV's order.
 struct Distortion {
   double k1 = 0.0;  // radial, r^2
