@@ -1,5 +1,8 @@
 #include "carousel/sim/test_scenes.h"
 
+#include <algorithm>
+#include <cmath>
+
 #include "carousel/core/error.h"
 #include "carousel/core/mesh_primitives.h"
 
@@ -70,6 +73,93 @@ Scene MakeCheckerPlaneScene(double size, int squares, double height, int texels_
   scene.triangles.emplace_back(0, 1, 2);
   scene.triangles.emplace_back(0, 2, 3);
   scene.triangle_material = {0, 0};
+  return scene;
+}
+
+Rigid3d StandCardOnTable(const Eigen::Matrix<double, 2, 3>& plane_from_pixel, const cv::Size& image,
+                         double lean_deg, double lift_m) {
+  CAROUSEL_THROW_IF(image.width < 2 || image.height < 2 || !(std::abs(lean_deg) < 89.0),
+                    InvalidArgument, "StandCardOnTable: bad image size or lean");
+  // Image right and down in plane coordinates, and the plane normal they span.
+  const Eigen::Vector2d right2 = plane_from_pixel.leftCols<2>() * Eigen::Vector2d(1, 0);
+  const Eigen::Vector2d down2 = plane_from_pixel.leftCols<2>() * Eigen::Vector2d(0, 1);
+  Eigen::Matrix3d in_plane;
+  const Eigen::Vector3d right(right2.x(), right2.y(), 0.0);
+  const Eigen::Vector3d down(down2.x(), down2.y(), 0.0);
+  in_plane << right.normalized(), down.normalized(), right.cross(down).normalized();
+  // The same directions on the table: right along +X, down the leaning card.
+  const double lean = lean_deg * M_PI / 180.0;
+  const Eigen::Vector3d table_right(1, 0, 0);
+  const Eigen::Vector3d table_down(0, -std::sin(lean), -std::cos(lean));
+  Eigen::Matrix3d on_table;
+  on_table << table_right, table_down, table_right.cross(table_down);
+  Rigid3d pose(on_table * in_plane.transpose(), Eigen::Vector3d::Zero());
+  // Centre on the axis, lowest corner at lift_m.
+  const Eigen::Vector2d centre_px(0.5 * (image.width - 1), 0.5 * (image.height - 1));
+  const Eigen::Vector2d c2 = plane_from_pixel * centre_px.homogeneous();
+  const Eigen::Vector3d centre = pose * Eigen::Vector3d(c2.x(), c2.y(), 0.0);
+  double lowest = 1e30;
+  for (const Eigen::Vector2d& px :
+       {Eigen::Vector2d(-0.5, -0.5), Eigen::Vector2d(image.width - 0.5, image.height - 0.5),
+        Eigen::Vector2d(-0.5, image.height - 0.5), Eigen::Vector2d(image.width - 0.5, -0.5)}) {
+    const Eigen::Vector2d xy = plane_from_pixel * px.homogeneous();
+    lowest = std::min(lowest, (pose * Eigen::Vector3d(xy.x(), xy.y(), 0.0)).z());
+  }
+  pose.translation = Eigen::Vector3d(-centre.x(), -centre.y(), lift_m - lowest);
+  return pose;
+}
+
+Scene MakePrintedCardScene(const cv::Mat& image,
+                           const Eigen::Matrix<double, 2, 3>& plane_from_pixel,
+                           const Rigid3d& table_from_plane, double thickness_m) {
+  CAROUSEL_THROW_IF(image.empty() || image.depth() != CV_8U, InvalidArgument,
+                    "MakePrintedCardScene: an 8-bit image is needed");
+  CAROUSEL_THROW_IF(!(thickness_m > 0), InvalidArgument,
+                    "MakePrintedCardScene: the card needs a thickness > 0");
+  const Eigen::Matrix2d linear = plane_from_pixel.leftCols<2>();
+  const double det = linear.determinant();
+  CAROUSEL_THROW_IF(!(std::abs(det) > 0), InvalidArgument,
+                    "MakePrintedCardScene: plane_from_pixel is singular");
+  Scene scene;
+  scene.source = "printed card";
+  scene.textures.push_back(std::make_shared<const Texture>(image));
+  scene.materials.push_back(Material{"print", {1.0f, 1.0f, 1.0f}, 0, false});
+  scene.materials.push_back(Material{"card", {0.45f, 0.42f, 0.38f}, -1, false});
+  // Image x right and y down span the plane; the viewer of the print is on the side where
+  // they appear right-handed (-z of the plane when det > 0).
+  const Eigen::Vector3d front = table_from_plane.rotation * Eigen::Vector3d(0, 0, det > 0 ? -1 : 1);
+  const double w = image.cols - 0.5;
+  const double h = image.rows - 0.5;
+  const Eigen::Vector2d pixels[4] = {{-0.5, -0.5}, {w, -0.5}, {w, h}, {-0.5, h}};
+  const Eigen::Vector2f uvs[4] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+  Eigen::Vector3d corners[4];
+  for (int k = 0; k < 4; ++k) {
+    const Eigen::Vector2d xy = plane_from_pixel * pixels[k].homogeneous();
+    corners[k] = table_from_plane * Eigen::Vector3d(xy.x(), xy.y(), 0.0);
+  }
+  const bool counter_clockwise =
+      (corners[1] - corners[0]).cross(corners[2] - corners[0]).dot(front) > 0;
+  const auto add_face = [&](const Eigen::Vector3d& offset, const Eigen::Vector3d& normal,
+                            int material, bool ccw) {
+    const int base = static_cast<int>(scene.positions.size());
+    for (int k = 0; k < 4; ++k) {
+      scene.positions.push_back(corners[k] + offset);
+      scene.normals.push_back(normal.cast<float>());
+      scene.uvs.push_back(uvs[k]);
+    }
+    if (ccw) {
+      scene.triangles.emplace_back(base, base + 1, base + 2);
+      scene.triangles.emplace_back(base, base + 2, base + 3);
+    } else {
+      scene.triangles.emplace_back(base, base + 2, base + 1);
+      scene.triangles.emplace_back(base, base + 3, base + 2);
+    }
+    scene.triangle_material.push_back(material);
+    scene.triangle_material.push_back(material);
+  };
+  add_face(Eigen::Vector3d::Zero(), front, 0, counter_clockwise);
+  add_face(-thickness_m * front, -front, 1, !counter_clockwise);
+  scene.Validate();
   return scene;
 }
 

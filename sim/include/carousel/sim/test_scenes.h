@@ -2,6 +2,10 @@
 // against ground truth. All in the turntable frame, metres.
 #pragma once
 
+#include <opencv2/core.hpp>
+
+#include "carousel/core/rigid3.h"
+
 #include <string>
 
 #include "carousel/core/mesh.h"
@@ -26,5 +30,21 @@ Scene MakeRingScene(double major_radius, double minor_radius,
 // texels each. The inner checker corners sit at (-size/2 + i*size/squares, ...).
 Scene MakeCheckerPlaneScene(double size, int squares, double height = 0.0,
                             int texels_per_square = 64);
+
+// A printed card: `image` (8-bit grey or BGR) printed on the front of a flat card of
+// `thickness_m` whose back is plain grey, e.g. a calibration board on the turntable.
+// `plane_from_pixel` maps image positions (OpenCV pixel convention) to the card's plane
+// coordinates (x, y; z = 0, metres); `table_from_plane` places the plane on the table. The
+// printed side faces the viewer who sees the image the right way round.
+// Where a card (an image mapped to its plane by `plane_from_pixel`) stands on the turntable:
+// centred on the axis, its image upright (image x along +X, image y down the card), the
+// print facing the cameras at table angle 0 (towards -Y), leaning back `lean_deg` from
+// vertical, its lowest edge `lift_m` above the plate. Returns table_from_plane.
+Rigid3d StandCardOnTable(const Eigen::Matrix<double, 2, 3>& plane_from_pixel, const cv::Size& image,
+                         double lean_deg, double lift_m);
+
+Scene MakePrintedCardScene(const cv::Mat& image,
+                           const Eigen::Matrix<double, 2, 3>& plane_from_pixel,
+                           const Rigid3d& table_from_plane, double thickness_m = 0.003);
 
 }  // namespace carousel::sim
