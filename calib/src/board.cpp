@@ -22,14 +22,22 @@ using internal::Median;
 const std::map<std::string, cv::aruco::PREDEFINED_DICTIONARY_NAME>& Dictionaries() {
   using namespace cv::aruco;
   static const std::map<std::string, PREDEFINED_DICTIONARY_NAME> kNames = {
-      {"DICT_4X4_50", DICT_4X4_50},         {"DICT_4X4_100", DICT_4X4_100},
-      {"DICT_4X4_250", DICT_4X4_250},       {"DICT_4X4_1000", DICT_4X4_1000},
-      {"DICT_5X5_50", DICT_5X5_50},         {"DICT_5X5_100", DICT_5X5_100},
-      {"DICT_5X5_250", DICT_5X5_250},       {"DICT_5X5_1000", DICT_5X5_1000},
-      {"DICT_6X6_50", DICT_6X6_50},         {"DICT_6X6_100", DICT_6X6_100},
-      {"DICT_6X6_250", DICT_6X6_250},       {"DICT_6X6_1000", DICT_6X6_1000},
-      {"DICT_7X7_50", DICT_7X7_50},         {"DICT_7X7_100", DICT_7X7_100},
-      {"DICT_7X7_250", DICT_7X7_250},       {"DICT_7X7_1000", DICT_7X7_1000},
+      {"DICT_4X4_50", DICT_4X4_50},
+      {"DICT_4X4_100", DICT_4X4_100},
+      {"DICT_4X4_250", DICT_4X4_250},
+      {"DICT_4X4_1000", DICT_4X4_1000},
+      {"DICT_5X5_50", DICT_5X5_50},
+      {"DICT_5X5_100", DICT_5X5_100},
+      {"DICT_5X5_250", DICT_5X5_250},
+      {"DICT_5X5_1000", DICT_5X5_1000},
+      {"DICT_6X6_50", DICT_6X6_50},
+      {"DICT_6X6_100", DICT_6X6_100},
+      {"DICT_6X6_250", DICT_6X6_250},
+      {"DICT_6X6_1000", DICT_6X6_1000},
+      {"DICT_7X7_50", DICT_7X7_50},
+      {"DICT_7X7_100", DICT_7X7_100},
+      {"DICT_7X7_250", DICT_7X7_250},
+      {"DICT_7X7_1000", DICT_7X7_1000},
       {"DICT_ARUCO_ORIGINAL", DICT_ARUCO_ORIGINAL}};
   return kNames;
 }
@@ -39,8 +47,7 @@ cv::Ptr<cv::aruco::Dictionary> Dictionary(const BoardSpec& board) {
 }
 
 cv::Ptr<cv::aruco::CharucoBoard> Charuco(const BoardSpec& board) {
-  return cv::aruco::CharucoBoard::create(board.cols, board.rows,
-                                         static_cast<float>(board.square_m),
+  return cv::aruco::CharucoBoard::create(board.cols, board.rows, static_cast<float>(board.square_m),
                                          static_cast<float>(board.marker_m), Dictionary(board));
 }
 
@@ -52,9 +59,9 @@ int WholeNumber(const std::string& text, const std::string& what, const std::str
   } catch (const std::exception&) {
     used = 0;
   }
-  CAROUSEL_THROW_IF(used == 0 || used != text.size(), InvalidArgument,
-                    "board \"" << spec << "\": " << what << " \"" << text
-                               << "\" is not a whole number");
+  CAROUSEL_THROW_IF(
+      used == 0 || used != text.size(), InvalidArgument,
+      "board \"" << spec << "\": " << what << " \"" << text << "\" is not a whole number");
   return value;
 }
 
@@ -66,9 +73,9 @@ double Metres(const std::string& text, const std::string& what, const std::strin
   } catch (const std::exception&) {
     used = 0;
   }
-  CAROUSEL_THROW_IF(used == 0 || used != text.size(), InvalidArgument,
-                    "board \"" << spec << "\": " << what << " \"" << text
-                               << "\" is not a number (metres)");
+  CAROUSEL_THROW_IF(
+      used == 0 || used != text.size(), InvalidArgument,
+      "board \"" << spec << "\": " << what << " \"" << text << "\" is not a number (metres)");
   return value;
 }
 
@@ -87,7 +94,9 @@ double Bilinear(const cv::Mat& gray, double x, double y) {
   if (x0 < 0 || y0 < 0 || x0 + 1 >= gray.cols || y0 + 1 >= gray.rows) return -1.0;
   const double fx = x - x0;
   const double fy = y - y0;
-  const auto at = [&](int xx, int yy) { return static_cast<double>(gray.at<std::uint8_t>(yy, xx)); };
+  const auto at = [&](int xx, int yy) {
+    return static_cast<double>(gray.at<std::uint8_t>(yy, xx));
+  };
   return (1 - fy) * ((1 - fx) * at(x0, y0) + fx * at(x0 + 1, y0)) +
          fy * ((1 - fx) * at(x0, y0 + 1) + fx * at(x0 + 1, y0 + 1));
 }
@@ -280,12 +289,12 @@ std::string BoardSpec::ToString() const {
 }
 
 void BoardSpec::Validate() const {
-  CAROUSEL_THROW_IF(!(square_m > 0) || !std::isfinite(square_m) || square_m > 1.0,
-                    InvalidArgument, "the square size must be in (0, 1] m, got " << square_m);
+  CAROUSEL_THROW_IF(!(square_m > 0) || !std::isfinite(square_m) || square_m > 1.0, InvalidArgument,
+                    "the square size must be in (0, 1] m, got " << square_m);
   if (kind == BoardKind::kChessboard) {
-    CAROUSEL_THROW_IF(cols < 3 || rows < 3 || cols > 100 || rows > 100, InvalidArgument,
-                      "a chessboard needs 3..100 inner corners each way, got " << cols << 'x'
-                                                                                << rows);
+    CAROUSEL_THROW_IF(
+        cols < 3 || rows < 3 || cols > 100 || rows > 100, InvalidArgument,
+        "a chessboard needs 3..100 inner corners each way, got " << cols << 'x' << rows);
     CAROUSEL_THROW_IF((cols + rows) % 2 == 0, InvalidArgument,
                       "a chessboard of " << cols << 'x' << rows
                                          << " inner corners looks the same turned half round, "
@@ -301,8 +310,7 @@ void BoardSpec::Validate() const {
   if (it == Dictionaries().end()) {
     std::string names;
     for (const auto& [name, value] : Dictionaries()) names += (names.empty() ? "" : ", ") + name;
-    throw InvalidArgument("unknown ArUco dictionary \"" + dictionary + "\" (one of " + names +
-                          ")");
+    throw InvalidArgument("unknown ArUco dictionary \"" + dictionary + "\" (one of " + names + ")");
   }
   const int markers = cols * rows / 2;
   const int codes = cv::aruco::getPredefinedDictionary(it->second)->bytesList.rows;
@@ -327,16 +335,15 @@ std::vector<cv::Point3f> BoardSpec::ObjectPoints() const {
   points.reserve(static_cast<std::size_t>(cols * rows));
   for (int r = 0; r < rows; ++r) {
     for (int c = 0; c < cols; ++c) {
-      points.emplace_back(static_cast<float>(c * square_m), static_cast<float>(r * square_m),
-                          0.0F);
+      points.emplace_back(static_cast<float>(c * square_m), static_cast<float>(r * square_m), 0.0F);
     }
   }
   return points;
 }
 
 void DetectOptions::Validate() const {
-  CAROUSEL_THROW_IF(!(min_board_area_fraction >= 0 && min_board_area_fraction < 1),
-                    InvalidArgument, "min_board_area_fraction must be in [0, 1)");
+  CAROUSEL_THROW_IF(!(min_board_area_fraction >= 0 && min_board_area_fraction < 1), InvalidArgument,
+                    "min_board_area_fraction must be in [0, 1)");
   CAROUSEL_THROW_IF(min_corners < 4, InvalidArgument, "min_corners must be >= 4");
   CAROUSEL_THROW_IF(!(max_edge_width_px > 0), InvalidArgument, "max_edge_width_px must be > 0");
   CAROUSEL_THROW_IF(detect_max_side < 640, InvalidArgument, "detect_max_side must be >= 640");
@@ -355,9 +362,9 @@ BoardDetection DetectBoard(const cv::Mat& image, const BoardSpec& board,
 
   // Search on a reduced copy, refine on the original.
   const int max_dim = std::max(gray.cols, gray.rows);
-  const double scale =
-      max_dim > options.detect_max_side ? static_cast<double>(options.detect_max_side) / max_dim
-                                        : 1.0;
+  const double scale = max_dim > options.detect_max_side
+                           ? static_cast<double>(options.detect_max_side) / max_dim
+                           : 1.0;
   cv::Mat small = gray;
   if (scale < 1.0) cv::resize(gray, small, cv::Size(), scale, scale, cv::INTER_AREA);
   const auto to_full = [scale](cv::Point2f p) {
@@ -402,15 +409,15 @@ BoardDetection DetectBoard(const cv::Mat& image, const BoardSpec& board,
     std::vector<std::vector<cv::Point2f>> markers;
     std::vector<std::vector<cv::Point2f>> rejected;
     std::vector<int> marker_ids;
-    cv::aruco::detectMarkers(small, charuco->dictionary, markers, marker_ids, parameters,
-                             rejected);
+    cv::aruco::detectMarkers(small, charuco->dictionary, markers, marker_ids, parameters, rejected);
     if (!marker_ids.empty()) {
       cv::aruco::refineDetectedMarkers(small, charuco, markers, marker_ids, rejected);
     }
     detection.markers = static_cast<int>(marker_ids.size());
     if (marker_ids.empty()) {
-      detection.reason = "no marker of the ChArUco board found (not in the picture, turned "
-                         "away, or a board of another dictionary)";
+      detection.reason =
+          "no marker of the ChArUco board found (not in the picture, turned "
+          "away, or a board of another dictionary)";
       return detection;
     }
     for (auto& quad : markers) {
@@ -513,8 +520,8 @@ BoardImage DrawBoard(const BoardSpec& board, int pixels_per_square, int margin_p
   options.detect_max_side = std::max(640, std::max(size.width, size.height));
   const BoardDetection d = DetectBoard(drawn.image, board, options);
   const std::vector<cv::Point3f> object = board.ObjectPoints();
-  CAROUSEL_THROW_IF(static_cast<int>(d.ids.size()) != board.CornersX() * board.CornersY(),
-                    Error, "the drawn ChArUco board does not show all its corners");
+  CAROUSEL_THROW_IF(static_cast<int>(d.ids.size()) != board.CornersX() * board.CornersY(), Error,
+                    "the drawn ChArUco board does not show all its corners");
   Eigen::MatrixXd a(static_cast<Eigen::Index>(d.ids.size()), 3);
   Eigen::MatrixXd b(static_cast<Eigen::Index>(d.ids.size()), 2);
   for (std::size_t i = 0; i < d.ids.size(); ++i) {
@@ -541,7 +548,8 @@ BoardImage DrawBoard(const BoardSpec& board, int pixels_per_square, int margin_p
     const double zero_edge = sign > 0 ? margin_px : margin_px + along;
     drawn.board_from_pixel(axis, 2) = -sign * metres_per_px * (zero_edge - 0.5);
   }
-  const double residual_m = (a * drawn.board_from_pixel.transpose() - b).rowwise().norm().maxCoeff();
+  const double residual_m =
+      (a * drawn.board_from_pixel.transpose() - b).rowwise().norm().maxCoeff();
   CAROUSEL_THROW_IF(residual_m > 0.5 * metres_per_px, Error,
                     "the drawn ChArUco board's corners are not where its layout puts them ("
                         << residual_m / metres_per_px << " px off)");

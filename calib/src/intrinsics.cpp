@@ -8,10 +8,10 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "calib_internal.h"
 #include "carousel/core/error.h"
 #include "carousel/core/file_util.h"
 #include "carousel/core/image_io.h"
-#include "calib_internal.h"
 
 namespace carousel::calib {
 namespace {
@@ -65,9 +65,8 @@ double RunCalibration(const std::vector<UsableView>& usable, const cv::Size& siz
 
 }  // namespace
 
-IntrinsicsResult CalibrateIntrinsics(const std::vector<NamedImage>& images,
-                                     const BoardSpec& board, const IntrinsicsOptions& options,
-                                     Progress& progress) {
+IntrinsicsResult CalibrateIntrinsics(const std::vector<NamedImage>& images, const BoardSpec& board,
+                                     const IntrinsicsOptions& options, Progress& progress) {
   board.Validate();
   options.Validate();
   IntrinsicsResult result;
@@ -121,15 +120,16 @@ IntrinsicsResult CalibrateIntrinsics(const std::vector<NamedImage>& images,
   // Reject reprojection outliers (a board that moved during the exposure, a wrong corner
   // order) and calibrate again, a few rounds at most.
   for (int round = 0; round < 3 && options.outlier_factor > 0; ++round) {
-    const double limit = std::max(options.outlier_factor * Median(per_view), options.outlier_floor_px);
+    const double limit =
+        std::max(options.outlier_factor * Median(per_view), options.outlier_floor_px);
     std::vector<UsableView> kept;
     for (std::size_t i = 0; i < usable.size(); ++i) {
       if (per_view[i] <= limit) {
         kept.push_back(usable[i]);
       } else {
-        result.views[usable[i].report].reason =
-            "a reprojection outlier (" + Fixed(per_view[i], 2) + " px RMS, the others' median " +
-            Fixed(Median(per_view), 2) + " px)";
+        result.views[usable[i].report].reason = "a reprojection outlier (" + Fixed(per_view[i], 2) +
+                                                " px RMS, the others' median " +
+                                                Fixed(Median(per_view), 2) + " px)";
         result.views[usable[i].report].corners = 0;
       }
     }
@@ -171,8 +171,8 @@ IntrinsicsResult CalibrateIntrinsics(const std::vector<NamedImage>& images,
       seen[static_cast<std::size_t>(cy * 3 + cx)] = true;
     }
   }
-  result.cell_coverage =
-      static_cast<double>(std::count(seen.begin(), seen.end(), true)) / static_cast<double>(seen.size());
+  result.cell_coverage = static_cast<double>(std::count(seen.begin(), seen.end(), true)) /
+                         static_cast<double>(seen.size());
   result.corners_covered = seen[0] && seen[2] && seen[6] && seen[8];
   if (!result.corners_covered) {
     result.warnings.push_back(
@@ -225,28 +225,47 @@ IntrinsicsResult CalibrateIntrinsics(const std::vector<std::filesystem::path>& i
 
 // ---- OpenCV YAML ----
 
-void WriteOpenCvIntrinsics(const std::filesystem::path& path, const IntrinsicsResult& result,
-                           const BoardSpec& board) {
-  const CameraModel& c = result.camera;
-  cv::FileStorage fs(".yml", cv::FileStorage::WRITE | cv::FileStorage::MEMORY |
-                                 cv::FileStorage::FORMAT_YAML);
-  fs << "nframes" << result.UsedViews();
+namespace {
+
+// image size, camera_matrix, distortion_coefficients and the RMS, into `fs`.
+void WriteCamera(cv::FileStorage& fs, const CameraModel& c, double rms_px) {
   fs << "image_width" << c.width;
   fs << "image_height" << c.height;
-  fs << "board_width" << board.cols;
-  fs << "board_height" << board.rows;
-  fs << "square_size" << board.square_m;
   const cv::Mat k = (cv::Mat_<double>(3, 3) << c.fx, 0.0, c.cx, 0.0, c.fy, c.cy, 0.0, 0.0, 1.0);
   const cv::Mat d = (cv::Mat_<double>(5, 1) << c.distortion.k1, c.distortion.k2, c.distortion.p1,
                      c.distortion.p2, c.distortion.k3);
   fs << "camera_matrix" << k;
   fs << "distortion_coefficients" << d;
-  fs << "avg_reprojection_error" << result.rms_px;
+  fs << "avg_reprojection_error" << rms_px;
+}
+
+cv::FileStorage MemoryYaml() {
+  return cv::FileStorage(
+      ".yml", cv::FileStorage::WRITE | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
+}
+
+}  // namespace
+
+void WriteOpenCvIntrinsics(const std::filesystem::path& path, const IntrinsicsResult& result,
+                           const BoardSpec& board) {
+  cv::FileStorage fs = MemoryYaml();
+  fs << "nframes" << result.UsedViews();
+  fs << "board_width" << board.cols;
+  fs << "board_height" << board.rows;
+  fs << "square_size" << board.square_m;
+  WriteCamera(fs, result.camera, result.rms_px);
   std::vector<double> per_view;
   for (const ViewReport& v : result.views) {
     if (v.used) per_view.push_back(v.rms_px);
   }
   fs << "per_view_reprojection_errors" << cv::Mat(per_view, true);
+  WriteFileAtomic(path, fs.releaseAndGetString());
+}
+
+void WriteOpenCvIntrinsics(const std::filesystem::path& path, const CameraModel& camera,
+                           double rms_px) {
+  cv::FileStorage fs = MemoryYaml();
+  WriteCamera(fs, camera, rms_px);
   WriteFileAtomic(path, fs.releaseAndGetString());
 }
 
@@ -286,8 +305,9 @@ CameraModel ReadOpenCvIntrinsics(const std::filesystem::path& path) {
   if (d.total() < 4) throw FormatError(path, "distortion_coefficients has fewer than 4 values");
   for (int i = 5; i < static_cast<int>(d.total()); ++i) {
     if (d.at<double>(i) != 0.0) {
-      throw FormatError(path, "distortion_coefficients beyond k1 k2 p1 p2 k3 (the rational or "
-                              "thin-prism model) are not supported");
+      throw FormatError(path,
+                        "distortion_coefficients beyond k1 k2 p1 p2 k3 (the rational or "
+                        "thin-prism model) are not supported");
     }
   }
   camera.fx = k.at<double>(0, 0);

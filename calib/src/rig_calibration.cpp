@@ -1,11 +1,11 @@
 #include "carousel/calib/rig_calibration.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <map>
 #include <memory>
 #include <mutex>
-#include <array>
 #include <numbers>
 #include <set>
 #include <sstream>
@@ -44,9 +44,9 @@ Intrinsics ToIntrinsics(const CameraModel& c) {
 }
 
 Intrinsics ToIntrinsics(const cv::Mat& k, const cv::Mat& d) {
-  return {k.at<double>(0, 0), k.at<double>(1, 1), k.at<double>(0, 2), k.at<double>(1, 2),
-          d.at<double>(0),    d.at<double>(1),    d.at<double>(2),    d.at<double>(3),
-          d.at<double>(4)};
+  return {k.at<double>(0, 0), k.at<double>(1, 1), k.at<double>(0, 2),
+          k.at<double>(1, 2), d.at<double>(0),    d.at<double>(1),
+          d.at<double>(2),    d.at<double>(3),    d.at<double>(4)};
 }
 
 Pose ToPose(const Rigid3d& r) {
@@ -87,14 +87,16 @@ Rigid3d Average(const std::vector<Rigid3d>& poses) {
   return {mean.toRotationMatrix(), translation / static_cast<double>(poses.size())};
 }
 
-double WrapAngle(double a) {
-  return std::remainder(a, 2.0 * std::numbers::pi);
-}
+double WrapAngle(double a) { return std::remainder(a, 2.0 * std::numbers::pi); }
 
 // The reprojection of one board corner in one photo.
 struct CornerCost {
   CornerCost(const cv::Point3f& board_point, const cv::Point2f& observed, double reported_rad)
-      : x_(board_point.x), y_(board_point.y), z_(board_point.z), u_(observed.x), v_(observed.y),
+      : x_(board_point.x),
+        y_(board_point.y),
+        z_(board_point.z),
+        u_(observed.x),
+        v_(observed.y),
         reported_(reported_rad) {}
 
   template <typename T>
@@ -118,8 +120,8 @@ struct CornerCost {
     const T yn = cam[1] / cam[2];
     T xd;
     T yd;
-    DistortNormalized(intrinsics[4], intrinsics[5], intrinsics[6], intrinsics[7], intrinsics[8],
-                      xn, yn, &xd, &yd);
+    DistortNormalized(intrinsics[4], intrinsics[5], intrinsics[6], intrinsics[7], intrinsics[8], xn,
+                      yn, &xd, &yd);
     residual[0] = intrinsics[0] * xd + intrinsics[2] - T(u_);
     residual[1] = intrinsics[1] * yd + intrinsics[3] - T(v_);
     return true;
@@ -199,9 +201,9 @@ void RigCalibrationOptions::Validate() const {
 }
 
 CameraModel RigCalibration::CameraAt(int index, double table_angle_rad) const {
-  CAROUSEL_THROW_IF(index < 0 || index >= static_cast<int>(cameras.size()), InvalidArgument,
-                    "the rig calibration has " << cameras.size() << " camera(s), not a camera "
-                                               << index);
+  CAROUSEL_THROW_IF(
+      index < 0 || index >= static_cast<int>(cameras.size()), InvalidArgument,
+      "the rig calibration has " << cameras.size() << " camera(s), not a camera " << index);
   CameraModel camera = cameras[static_cast<std::size_t>(index)].camera;
   camera.cam_from_world = camera.cam_from_world * Rigid3d::RotationZ(table_angle_rad);
   return camera;
@@ -269,14 +271,15 @@ RigCalibrationResult CalibrateRig(const std::vector<RigPhoto>& inputs, const Boa
       report.reason = detections[i].reason;
     } else if (!size.empty() && sizes[i] != size) {
       report.reason = "its size " + std::to_string(sizes[i].width) + "x" +
-                      std::to_string(sizes[i].height) + " differs from the camera's other photos (" +
-                      std::to_string(size.width) + "x" + std::to_string(size.height) + ")";
+                      std::to_string(sizes[i].height) +
+                      " differs from the camera's other photos (" + std::to_string(size.width) +
+                      "x" + std::to_string(size.height) + ")";
     } else {
       size = sizes[i];
       report.corners = static_cast<int>(detections[i].corners.size());
       photos.push_back({i, inputs[i].camera, inputs[i].stop, inputs[i].placement,
-                        inputs[i].table_angle_rad,
-                        internal::MakeBoardView(board, detections[i]), Rigid3d()});
+                        inputs[i].table_angle_rad, internal::MakeBoardView(board, detections[i]),
+                        Rigid3d()});
     }
   }
   const auto fail = [&](const std::string& why) {
@@ -305,13 +308,48 @@ RigCalibrationResult CalibrateRig(const std::vector<RigPhoto>& inputs, const Boa
     }
   }
 
+  // A camera whose photos never show the board near the image corners cannot tell k3 from
+  // k1 and k2 there: k3 is held at 0 for it; one that sees the board in fewer than 6 of the
+  // image's 3 x 3 cells holds k2 at 0 too (and says so): an unconstrained r^4 term fits the
+  // middle and wrecks the corners.
+  std::vector<bool> fix_k3(static_cast<std::size_t>(camera_count), options.fix_k3);
+  std::vector<bool> fix_k2(static_cast<std::size_t>(camera_count), false);
+  for (int c = 0; c < camera_count; ++c) {
+    const cv::Size& size = camera_size[static_cast<std::size_t>(c)];
+    std::array<bool, 9> seen{};
+    for (const Photo* p : views_of(c)) {
+      for (const cv::Point2f& q : p->view.image) {
+        const int x = std::clamp(static_cast<int>(3.0 * q.x / size.width), 0, 2);
+        const int y = std::clamp(static_cast<int>(3.0 * q.y / size.height), 0, 2);
+        seen[static_cast<std::size_t>(3 * y + x)] = true;
+      }
+    }
+    const int cells = static_cast<int>(std::count(seen.begin(), seen.end(), true));
+    const bool given = static_cast<std::size_t>(c) < intrinsics.size() && intrinsics[c];
+    if (given) continue;  // a lens calibrated beforehand keeps its model
+    if (cells < 6) {
+      fix_k2[static_cast<std::size_t>(c)] = true;
+      fix_k3[static_cast<std::size_t>(c)] = true;
+      result.warnings.push_back("camera " + std::to_string(c) + " saw the board in only " +
+                                std::to_string(cells) +
+                                " of the image's 9 cells: its k2 and k3 are held at 0 (calibrate "
+                                "its intrinsics with a board held near the image corners)");
+    } else if (!options.fix_k3 && !(seen[0] && seen[2] && seen[6] && seen[8])) {
+      fix_k3[static_cast<std::size_t>(c)] = true;
+      result.warnings.push_back("camera " + std::to_string(c) +
+                                " never saw the board in every image corner: its k3 is held at 0 "
+                                "(the distortion near the corners is extrapolated)");
+    }
+  }
+
   // ---- initial values: intrinsics, board poses, axis, camera poses ----
   progress.BeginStage("initial poses");
   std::vector<Intrinsics> intr(static_cast<std::size_t>(camera_count));
-  int flags = 0;
-  if (options.fix_k3) flags |= cv::CALIB_FIX_K3;
-  if (options.zero_tangential) flags |= cv::CALIB_ZERO_TANGENT_DIST;
   for (int c = 0; c < camera_count; ++c) {
+    int flags = 0;
+    if (fix_k3[static_cast<std::size_t>(c)]) flags |= cv::CALIB_FIX_K3;
+    if (fix_k2[static_cast<std::size_t>(c)]) flags |= cv::CALIB_FIX_K2;
+    if (options.zero_tangential) flags |= cv::CALIB_ZERO_TANGENT_DIST;
     std::vector<Photo*> of = views_of(c);
     const bool given = static_cast<std::size_t>(c) < intrinsics.size() && intrinsics[c];
     if (given) {
@@ -319,8 +357,8 @@ RigCalibrationResult CalibrateRig(const std::vector<RigPhoto>& inputs, const Boa
       const cv::Size& size = camera_size[static_cast<std::size_t>(c)];
       CAROUSEL_THROW_IF(known.width != size.width || known.height != size.height, InvalidArgument,
                         "camera " << c << "'s intrinsics are for " << known.width << "x"
-                                  << known.height << " photos, its photos are " << size.width
-                                  << "x" << size.height);
+                                  << known.height << " photos, its photos are " << size.width << "x"
+                                  << size.height);
       intr[static_cast<std::size_t>(c)] = ToIntrinsics(known);
       const cv::Matx33d k = known.CvCameraMatrix();
       const cv::Vec<double, 5> d = known.CvDistCoeffs();
@@ -377,7 +415,8 @@ RigCalibrationResult CalibrateRig(const std::vector<RigPhoto>& inputs, const Boa
               .Inverse() *
           p.cam_from_board);
     }
-    for (const auto& [placement, estimates] : board_estimates) boards[placement] = Average(estimates);
+    for (const auto& [placement, estimates] : board_estimates)
+      boards[placement] = Average(estimates);
     std::map<int, std::vector<Rigid3d>> camera_estimates;
     for (const Photo& p : photos) {
       if (placed_cameras.count(p.camera) || !boards.count(p.placement)) continue;
@@ -390,11 +429,11 @@ RigCalibrationResult CalibrateRig(const std::vector<RigPhoto>& inputs, const Boa
     }
   }
   for (const Photo& p : photos) {
-    CAROUSEL_THROW_IF(!boards.count(p.placement) || !placed_cameras.count(p.camera), InvalidArgument,
-                      "cannot calibrate the rig: camera " << p.camera << " and board placement "
-                                                          << p.placement
-                                                          << " are not linked to the others by "
-                                                             "any photo");
+    CAROUSEL_THROW_IF(
+        !boards.count(p.placement) || !placed_cameras.count(p.camera), InvalidArgument,
+        "cannot calibrate the rig: camera " << p.camera << " and board placement " << p.placement
+                                            << " are not linked to the others by "
+                                               "any photo");
   }
 
   // ---- bundle adjustment, with outlier photos dropped ----
@@ -436,12 +475,19 @@ RigCalibrationResult CalibrateRig(const std::vector<RigPhoto>& inputs, const Boa
         continue;
       }
       std::vector<int> fixed;
-      fixed.reserve(3);
+      fixed.reserve(4);
       if (options.zero_tangential) {
         fixed.push_back(6);
         fixed.push_back(7);
       }
-      if (options.fix_k3) fixed.push_back(8);
+      if (fix_k2[static_cast<std::size_t>(c)]) {
+        intr[static_cast<std::size_t>(c)][5] = 0.0;
+        fixed.push_back(5);
+      }
+      if (fix_k3[static_cast<std::size_t>(c)]) {
+        intr[static_cast<std::size_t>(c)][8] = 0.0;
+        fixed.push_back(8);
+      }
       if (!fixed.empty()) problem.SetManifold(block, new ceres::SubsetManifold(9, fixed));
     }
     ceres::Solver::Options solver;
@@ -472,7 +518,8 @@ RigCalibrationResult CalibrateRig(const std::vector<RigPhoto>& inputs, const Boa
       photo_rms[j] = std::sqrt(sum / static_cast<double>(p.view.object.size()));
       used_rms.push_back(photo_rms[j]);
     }
-    const double limit = std::max(options.outlier_factor * Median(used_rms), options.outlier_floor_px);
+    const double limit =
+        std::max(options.outlier_factor * Median(used_rms), options.outlier_floor_px);
     bool dropped_any = false;
     for (std::size_t j = 0; j < photos.size(); ++j) {
       if (dropped[j] || photo_rms[j] <= limit) continue;
@@ -608,9 +655,9 @@ RigCalibrationResult CalibrateRig(const std::vector<RigPhoto>& inputs, const Boa
     result.warnings.push_back("the table's angles deviate from the board's rotation by up to " +
                               Fixed(calibration.angle_residual_max_deg, 3) + " deg");
   }
-  CAROUSEL_LOG_INFO("rig calibration: " << camera_count << " camera(s), " << corners
-                                        << " corners, " << Fixed(calibration.rms_px, 3)
-                                        << " px RMS, " << result.iterations << " iterations");
+  CAROUSEL_LOG_INFO("rig calibration: " << camera_count << " camera(s), " << corners << " corners, "
+                                        << Fixed(calibration.rms_px, 3) << " px RMS, "
+                                        << result.iterations << " iterations");
   return result;
 }
 

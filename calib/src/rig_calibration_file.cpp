@@ -77,7 +77,8 @@ std::string RigCalibrationToJsonText(const RigCalibration& calibration) {
          {"distortion",
           {m.distortion.k1, m.distortion.k2, m.distortion.p1, m.distortion.p2, m.distortion.k3}},
          {"cam_from_table",
-          {{"rotation_row_major", rotation}, {"translation", Vector(m.cam_from_world.translation)}}},
+          {{"rotation_row_major", rotation},
+           {"translation", Vector(m.cam_from_world.translation)}}},
          {"axis_in_camera",
           {{"direction", Vector(c.axis_direction_cam)}, {"point", Vector(c.axis_point_cam)}}},
          {"views", c.views},
@@ -130,7 +131,8 @@ RigCalibration ReadRigCalibration(const std::filesystem::path& path) {
   calibration.board = read.String(j, "board", "calibration");
   calibration.board_origin_height_m = read.Number(j, "board_origin_height_m", "calibration");
   const json& cameras = read.Field(j, "cameras", "calibration");
-  if (!cameras.is_array() || cameras.empty()) read.Fail("calibration.cameras is not a list of cameras");
+  if (!cameras.is_array() || cameras.empty())
+    read.Fail("calibration.cameras is not a list of cameras");
   for (std::size_t i = 0; i < cameras.size(); ++i) {
     const std::string where = "cameras[" + std::to_string(i) + "]";
     const json& c = cameras[i];
@@ -170,7 +172,8 @@ RigCalibration ReadRigCalibration(const std::filesystem::path& path) {
   calibration.rms_px = read.Number(residuals, "rms_px", "residuals");
   calibration.corners = read.Integer(residuals, "corners", "residuals");
   calibration.angle_scale = read.Number(residuals, "angle_scale", "residuals");
-  calibration.angle_residual_max_deg = read.Number(residuals, "angle_residual_max_deg", "residuals");
+  calibration.angle_residual_max_deg =
+      read.Number(residuals, "angle_residual_max_deg", "residuals");
   const json& angles = read.Field(residuals, "angles", "residuals");
   if (!angles.is_array()) read.Fail("residuals.angles is not a list");
   for (std::size_t i = 0; i < angles.size(); ++i) {

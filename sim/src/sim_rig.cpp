@@ -300,13 +300,15 @@ std::vector<std::uint8_t> SimCamera::Shoot() {
   const double angle = turntable_->Status().angle_rad;
   RenderOptions render = options_.render;
   render.exposure = std::clamp(ExposureGain(), 1e-3, 999.0);
+  std::shared_ptr<const Scene> scene;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     render.seed = options_.render.seed ^ (0x51ed27ULL * static_cast<std::uint64_t>(shots_));
     ++shots_;
+    scene = scene_;
   }
   const RenderResult result =
-      Render(*scene_, CameraAtTableAngle(cam_from_studio_, angle), angle, render);
+      Render(*scene, CameraAtTableAngle(cam_from_studio_, angle), angle, render);
   std::vector<std::uint8_t> jpeg;
   cv::imencode(".jpg", result.image, jpeg, {cv::IMWRITE_JPEG_QUALITY, options_.jpeg_quality});
   return jpeg;
@@ -352,8 +354,19 @@ cv::Mat SimCamera::PreviewFrame(std::chrono::milliseconds) {
   RenderOptions render = options_.render;
   render.samples_per_axis = 1;
   render.exposure = std::clamp(ExposureGain(), 1e-3, 999.0);
-  return Render(*scene_, CameraAtTableAngle(cam_from_studio_.Scaled(factor), angle), angle, render)
+  std::shared_ptr<const Scene> scene;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    scene = scene_;
+  }
+  return Render(*scene, CameraAtTableAngle(cam_from_studio_.Scaled(factor), angle), angle, render)
       .image;
+}
+
+void SimCamera::SetScene(std::shared_ptr<const Scene> scene) {
+  CAROUSEL_THROW_IF(!scene, InvalidArgument, "SimCamera::SetScene: no scene");
+  std::lock_guard<std::mutex> lock(mutex_);
+  scene_ = std::move(scene);
 }
 
 }  // namespace carousel::sim

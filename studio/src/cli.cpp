@@ -12,6 +12,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "carousel/calib/intrinsics.h"
 #include "carousel/core/error.h"
 #include "carousel/core/image_io.h"
 #include "carousel/core/logging.h"
@@ -19,6 +20,7 @@
 #include "carousel/core/progress.h"
 #include "carousel/core/timer.h"
 #include "carousel/core/version.h"
+#include "carousel/studio/calibrate_session.h"
 #include "carousel/studio/camera_command.h"
 #include "carousel/studio/import.h"
 #include "carousel/studio/pipeline.h"
@@ -33,18 +35,6 @@
 
 namespace carousel::studio {
 namespace {
-
-// The subcommands later issues fill in. Each is registered now so that `carousel --help`
-// shows the whole program; until built, it says so and exits with kExitUnavailable.
-struct PlannedCommand {
-  const char* name;
-  const char* summary;
-  const char* issue;
-};
-
-constexpr PlannedCommand kPlannedCommands[] = {
-    {"calibrate", "camera intrinsics and rig calibration", "issue 10 (calibration)"},
-};
 
 // Ctrl-C cancels the running stage through its token (lock-free atomic store: signal-safe).
 CancellationToken* g_interrupt_token = nullptr;
@@ -270,11 +260,55 @@ struct RunArgs {
   std::filesystem::path rig;  // a rig file: the hardware backends
   std::filesystem::path resume;
   std::string size = "5184x3456";
+  bool calibration = false;  // a calibration session
+  CalibrationPlan plan;
 };
+
+// Hardware calibration: the operator places the board; Enter continues (on a terminal).
+void AskForBoardPlacement(int index, int placements, std::ostream& err) {
+  err << "\nboard placement " << index + 1 << " of " << placements
+      << (index == 0 ? ": stand the board on the turntable"
+                     : ": lean the board differently (e.g. further back) without moving the "
+                       "cameras")
+      << (::isatty(STDIN_FILENO) ? ", then press Enter" : "") << std::endl;
+  if (::isatty(STDIN_FILENO)) {
+    std::string line;
+    std::getline(std::cin, line);
+  }
+}
+
+void PrintCalibration(const CalibrateSessionResult& r, std::ostream& out) {
+  const calib::RigCalibration& c = r.result.calibration;
+  int used = 0;
+  for (const calib::RigPhotoReport& p : r.result.photos) used += p.used;
+  out << std::fixed << std::setprecision(3) << "rig calibration " << r.file.string() << ": "
+      << c.cameras.size() << " camera(s), " << used << " of " << r.result.photos.size()
+      << " photos, " << c.corners << " corners, " << c.rms_px << " px RMS\n";
+  for (const calib::RigCameraCalibration& camera : c.cameras) {
+    const CameraModel& m = camera.camera;
+    const Eigen::Vector3d centre = m.Centre();
+    out << std::setprecision(2) << "  " << camera.name << ": fx " << m.fx << " fy " << m.fy
+        << " cx " << m.cx << " cy " << m.cy << " k1 " << std::setprecision(4) << m.distortion.k1
+        << " k2 " << m.distortion.k2 << std::setprecision(1) << "; centre (" << centre.x() * 1e3
+        << ", " << centre.y() * 1e3 << ", " << centre.z() * 1e3 << ") mm, " << std::setprecision(1)
+        << std::hypot(centre.x(), centre.y()) * 1e3 << " mm from the axis; " << camera.views
+        << " photos, " << std::setprecision(3) << camera.rms_px << " px RMS\n";
+  }
+  out << std::setprecision(4) << "  turntable: observed/reported angle " << c.angle_scale
+      << ", largest deviation " << std::setprecision(3) << c.angle_residual_max_deg << " deg\n";
+  for (const std::string& w : r.result.warnings) out << "  warning: " << w << "\n";
+}
 
 int RunOneButton(RunArgs& args, std::ostream& out, std::ostream& err) {
   CliProgress cli(err);
   RunResult result;
+  if (args.calibration) {
+    if (args.options.product.empty()) args.options.product = "rig-calibration";
+    args.options.calibration = args.plan;
+    args.options.place_board = [&err](int index, int placements) {
+      AskForBoardPlacement(index, placements, err);
+    };
+  }
   if (!args.resume.empty()) {
     result = ResumeSession(args.resume, cli.progress);
   } else if (args.sim) {
@@ -292,6 +326,14 @@ int RunOneButton(RunArgs& args, std::ostream& out, std::ostream& err) {
            "(the studio's turntable and cameras), or --resume SESSION\n";
     return kExitUsage;
   }
+  if (result.calibration || std::filesystem::exists(result.session / "calibration")) {
+    out << "session " << result.session.string() << ": " << result.photos_taken << " photos taken, "
+        << result.photos_kept << " kept from before, " << result.photos_retaken << " retaken\n";
+    if (result.calibration) PrintCalibration(*result.calibration, out);
+    out << "calibration: " << (result.session / "calibration" / "rig_calibration.json").string()
+        << " (carousel run --calibration-file FILE, or \"calibration_file\" in rig.json)\n";
+    return kExitOk;
+  }
   out << "session " << result.session.string() << ": " << result.photos_taken << " photos taken, "
       << result.photos_kept << " kept from before, " << result.photos_adopted << " adopted, "
       << result.photos_retaken << " retaken; reconstruct "
@@ -304,6 +346,70 @@ int RunOneButton(RunArgs& args, std::ostream& out, std::ostream& err) {
   const auto model = result.session / "model";
   out << "model: " << (model / "model.obj").string() << " (+ model.mtl, model.png), "
       << (model / "model.glb").string() << "\n";
+  return kExitOk;
+}
+
+struct CalibrateArgs {
+  // intrinsics
+  std::vector<std::filesystem::path> images;
+  calib::IntrinsicsOptions intrinsics;
+  // rig
+  std::filesystem::path session;
+  CalibrateSessionOptions rig;
+  double board_height_m = -1.0;
+  // board
+  int pixels_per_square = 200;
+  // all
+  std::string board;
+  std::filesystem::path out;
+};
+
+int RunCalibrateIntrinsics(CalibrateArgs& args, std::ostream& out, std::ostream& err) {
+  CAROUSEL_THROW_IF(args.board.empty(), InvalidArgument,
+                    "carousel calibrate intrinsics: --board is required");
+  CAROUSEL_THROW_IF(args.out.empty(), InvalidArgument,
+                    "carousel calibrate intrinsics: --out FILE is required");
+  const calib::BoardSpec board = calib::BoardSpec::Parse(args.board);
+  CliProgress cli(err);
+  const calib::IntrinsicsResult r =
+      calib::CalibrateIntrinsics(args.images, board, args.intrinsics, cli.progress);
+  calib::WriteOpenCvIntrinsics(args.out, r, board);
+  for (const calib::ViewReport& v : r.views) {
+    out << "  " << v.name << ": "
+        << (v.used ? "used, " + std::to_string(v.corners) + " corners" : "refused: " + v.reason);
+    if (v.used) out << std::fixed << std::setprecision(3) << ", " << v.rms_px << " px RMS";
+    out << "\n";
+  }
+  const CameraModel& c = r.camera;
+  out << std::fixed << std::setprecision(3) << "intrinsics " << args.out.string() << ": "
+      << r.UsedViews() << " of " << r.views.size() << " photos, " << r.rms_px << " px RMS; fx "
+      << c.fx << " fy " << c.fy << " cx " << c.cx << " cy " << c.cy << ", distortion "
+      << std::setprecision(5) << c.distortion.k1 << " " << c.distortion.k2 << " " << c.distortion.p1
+      << " " << c.distortion.p2 << " " << c.distortion.k3 << "; " << std::setprecision(0)
+      << 100.0 * r.cell_coverage << " % of the image covered\n";
+  for (const std::string& w : r.warnings) out << "  warning: " << w << "\n";
+  return kExitOk;
+}
+
+int RunCalibrateRig(CalibrateArgs& args, std::ostream& out, std::ostream& err) {
+  args.rig.board = args.board;
+  if (args.board_height_m >= 0) args.rig.board_origin_height_m = args.board_height_m;
+  CliProgress cli(err);
+  PrintCalibration(CalibrateSession(args.session, args.rig, args.out, cli.progress), out);
+  return kExitOk;
+}
+
+int RunCalibrateBoard(CalibrateArgs& args, std::ostream& out) {
+  CAROUSEL_THROW_IF(args.board.empty() || args.out.empty(), InvalidArgument,
+                    "carousel calibrate board: --board and --out are required");
+  const calib::BoardSpec board = calib::BoardSpec::Parse(args.board);
+  const calib::BoardImage drawn =
+      calib::DrawBoard(board, args.pixels_per_square, args.pixels_per_square / 2);
+  WriteImage(args.out, drawn.image);
+  const double dpi = args.pixels_per_square / (board.square_m / 0.0254);
+  out << std::fixed << std::setprecision(1) << "board " << args.out.string() << ": "
+      << drawn.image.cols << "x" << drawn.image.rows << " px; print at " << dpi
+      << " dpi for squares of " << board.square_m * 1e3 << " mm, then measure them\n";
   return kExitOk;
 }
 
@@ -584,9 +690,81 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
                           "shared test data folder (model names)");
   run_command->add_flag("--force", run_args.options.force,
                         "start over (the old session is kept beside it)");
+  run_command->add_flag("--calibration", run_args.calibration,
+                        "a calibration session: the table turns with the board on it (once per "
+                        "placement), the photos become calibration/rig_calibration.json");
+  run_command->add_option("--board", run_args.plan.board, "calibration: the board")
+      ->capture_default_str();
+  run_command
+      ->add_option("--placements", run_args.plan.placements,
+                   "calibration: passes of the table, the board placed anew for each")
+      ->capture_default_str();
+  run_command
+      ->add_option("--leans", run_args.plan.sim_leans_deg,
+                   "calibration, simulated rig: the board's lean back from vertical per pass, deg")
+      ->delimiter(',')
+      ->capture_default_str();
+  run_command->add_option("--board-height", run_args.plan.board_origin_height_m,
+                          "calibration on hardware: height of the board's origin (first corner) "
+                          "above the plate in the first placement, metres");
+  run_command->add_option("--calibration-file", run_args.options.calibration_file,
+                          "the photos' cameras from this rig calibration (carousel run "
+                          "--calibration) instead of the rig's own");
   run_command->get_option("--resume")->excludes("--sim");
   run_command->get_option("--rig")->excludes("--sim");
   run_command->get_option("--rig")->excludes("--resume");
+
+  // carousel calibrate intrinsics|rig|board
+  CalibrateArgs calibrate;
+  CLI::App* calibrate_command = app.add_subcommand(
+      "calibrate", "camera intrinsics from board photos, the rig from a calibration session");
+  calibrate_command->require_subcommand(1);
+  CLI::App* intrinsics_command = calibrate_command->add_subcommand(
+      "intrinsics", "one camera's intrinsics and lens distortion from photos of a board");
+  intrinsics_command->add_option("images", calibrate.images, "photos of the board")->required();
+  intrinsics_command
+      ->add_option("--board", calibrate.board,
+                   "chessboard:COLSxROWS:SQUARE_M or charuco:SXxSY:SQUARE_M:MARKER_M:DICT")
+      ->required();
+  intrinsics_command->add_option("--out", calibrate.out, "OpenCV YAML to write")->required();
+  intrinsics_command->add_flag("--fix-aspect", calibrate.intrinsics.fix_aspect_ratio, "fx = fy");
+  intrinsics_command->add_flag("--fix-k3", calibrate.intrinsics.fix_k3, "k3 = 0");
+  intrinsics_command->add_flag("--zero-tangential", calibrate.intrinsics.zero_tangential,
+                               "p1 = p2 = 0");
+  CLI::App* rig_calibrate_command = calibrate_command->add_subcommand(
+      "rig", "the turntable axis and every camera's pose (and lens) from a calibration session");
+  rig_calibrate_command->add_option("session", calibrate.session, "session folder")->required();
+  rig_calibrate_command->add_option(
+      "--out", calibrate.out,
+      "rig calibration file (default SESSION/calibration/rig_calibration.json)");
+  rig_calibrate_command->add_option("--board", calibrate.board,
+                                    "the board (default: the calibration session's)");
+  rig_calibrate_command->add_option(
+      "--board-height", calibrate.board_height_m,
+      "height of the first placement's board origin above the plate, metres");
+  rig_calibrate_command->add_option("--stops-per-placement", calibrate.rig.stops_per_placement,
+                                    "stops per board placement (default: the session's plan)");
+  rig_calibrate_command
+      ->add_option("--intrinsics", calibrate.rig.intrinsics,
+                   "per camera, OpenCV YAML intrinsics calibrated beforehand (empty: none)")
+      ->delimiter(',');
+  rig_calibrate_command->add_flag(
+      "--free-k3", [&calibrate](std::int64_t) { calibrate.rig.rig.fix_k3 = false; },
+      "estimate k3 too (wide lenses; needs the board near every image corner)");
+  rig_calibrate_command->add_flag(
+      "--keep-intrinsics",
+      [&calibrate](std::int64_t) { calibrate.rig.rig.refine_intrinsics = false; },
+      "hold the given intrinsics fixed");
+  rig_calibrate_command
+      ->add_option("--max-angle-error", calibrate.rig.rig.max_angle_error_deg,
+                   "largest disagreement of a reported table angle with the board, degrees")
+      ->capture_default_str();
+  CLI::App* board_command =
+      calibrate_command->add_subcommand("board", "draw a board to print (PNG)");
+  board_command->add_option("--board", calibrate.board, "the board")->required();
+  board_command->add_option("--out", calibrate.out, "PNG to write")->required();
+  board_command->add_option("--px-per-square", calibrate.pixels_per_square, "pixels per square")
+      ->capture_default_str();
 
   // carousel turntable
   TurntableArgs turntable;
@@ -740,14 +918,6 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
       ->capture_default_str();
   atlas_command->add_option("--charts-image", atlas.charts_image, "PNG of the charts");
 
-  std::vector<CLI::App*> planned;
-  for (const PlannedCommand& command : kPlannedCommands) {
-    CLI::App* sub = app.add_subcommand(command.name, command.summary);
-    sub->allow_extras();
-    sub->prefix_command();
-    planned.push_back(sub);
-  }
-
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -764,14 +934,10 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
   try {
     SetLogLevel(ParseLogLevel(log_level));
     if (!log_file.empty()) SetLogFile(log_file);
-    for (std::size_t i = 0; i < planned.size(); ++i) {
-      if (planned[i]->parsed()) {
-        err << "carousel " << kPlannedCommands[i].name << ": not built yet (see "
-            << kPlannedCommands[i].issue << ")\n";
-        return kExitUnavailable;
-      }
-    }
     if (self_check_command->parsed()) return RunSelfCheckCommand(self_check, out, err);
+    if (intrinsics_command->parsed()) return RunCalibrateIntrinsics(calibrate, out, err);
+    if (rig_calibrate_command->parsed()) return RunCalibrateRig(calibrate, out, err);
+    if (board_command->parsed()) return RunCalibrateBoard(calibrate, out);
     if (capture->parsed()) return RunSimCapture(sim_capture, out, err);
     if (import_command->parsed()) return RunImport(import_args, out, err);
     if (reconstruct_command->parsed()) return RunReconstruct(reconstruct, out, err);

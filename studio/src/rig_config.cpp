@@ -5,6 +5,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "carousel/calib/rig_calibration.h"
 #include "carousel/core/error.h"
 #include "carousel/core/file_util.h"
 #include "carousel/core/logging.h"
@@ -106,6 +107,8 @@ std::string RigConfigToJsonText(const RigConfig& config) {
               {"camera_timeout_s", config.capture.camera_timeout_s}}},
             {"backdrop", config.backdrop}};
   if (!config.backgrounds.empty()) j["backgrounds"] = config.backgrounds.string();
+  // The cameras above carry the calibration; the file is named for the record.
+  if (!config.calibration_file.empty()) j["calibration_from"] = config.calibration_file.string();
   return j.dump(2) + "\n";
 }
 
@@ -145,6 +148,21 @@ RigConfig RigConfigFromJsonText(const std::string& text, const std::filesystem::
   if (!j.contains("cameras") || !j["cameras"].is_array()) {
     throw FormatError(source, "rig has no \"cameras\" list");
   }
+  // The cameras' calibration from a rig calibration file (carousel calibrate rig), camera i
+  // of the rig being camera i of the file; or per camera in the rig file itself.
+  std::optional<calib::RigCalibration> calibration;
+  if (j.contains("calibration_file")) {
+    std::filesystem::path file = Get<std::string>(j, "calibration_file", source, "rig");
+    if (file.is_relative() && !source.empty()) file = source.parent_path() / file;
+    calibration = calib::ReadRigCalibration(file);
+    config.calibration_file = file;
+    if (calibration->cameras.size() != j["cameras"].size()) {
+      throw FormatError(source, "calibration_file " + file.string() + " calibrates " +
+                                    std::to_string(calibration->cameras.size()) +
+                                    " camera(s), the rig has " +
+                                    std::to_string(j["cameras"].size()));
+    }
+  }
   for (std::size_t i = 0; i < j["cameras"].size(); ++i) {
     const json& c = j["cameras"][i];
     const std::string where = "cameras[" + std::to_string(i) + "]";
@@ -153,10 +171,22 @@ RigConfig RigConfigFromJsonText(const std::string& text, const std::filesystem::
     camera.model = GetOr<std::string>(c, "model", "", source, where);
     camera.serial = GetOr<std::string>(c, "serial", "", source, where);
     camera.settings = GetOr<std::map<std::string, std::string>>(c, "settings", {}, source, where);
-    if (!c.contains("calibration")) {
-      throw FormatError(source, where + " has no calibration (run `carousel calibrate rig`)");
+    if (calibration) {
+      const calib::RigCameraCalibration& calibrated = calibration->cameras[i];
+      if (!camera.serial.empty() && !calibrated.serial.empty() &&
+          camera.serial != calibrated.serial) {
+        throw FormatError(source, where + " is the camera " + camera.serial +
+                                      ", the calibration file's camera " + std::to_string(i) +
+                                      " is " + calibrated.serial);
+      }
+      camera.calibration = calibrated.camera;
+    } else if (!c.contains("calibration")) {
+      throw FormatError(source, where +
+                                    " has no calibration (run `carousel run --calibration` "
+                                    "and name its result in \"calibration_file\")");
+    } else {
+      camera.calibration = CameraModelFromJson(c["calibration"], source, where + ".calibration");
     }
-    camera.calibration = CameraModelFromJson(c["calibration"], source, where + ".calibration");
     config.cameras.push_back(std::move(camera));
   }
   const json& p = j.contains("capture") ? j["capture"] : json::object();

@@ -11,6 +11,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "carousel/calib/board.h"
+#include "carousel/calib/rig_calibration.h"
 #include "carousel/core/error.h"
 #include "carousel/core/file_util.h"
 #include "carousel/core/image_io.h"
@@ -18,6 +20,7 @@
 #include "carousel/core/timer.h"
 #include "carousel/sim/scene.h"
 #include "carousel/sim/sim_rig.h"
+#include "carousel/sim/test_scenes.h"
 #include "carousel/studio/pipeline.h"
 #include "carousel/studio/session.h"
 
@@ -27,6 +30,8 @@ namespace {
 using json = nlohmann::json;
 
 constexpr const char* kRunFile = "run.json";
+// The rig calibration a session's photos take their cameras from (a copy of --calibration-file).
+constexpr const char* kSessionCalibration = "calibration.json";
 constexpr auto kDeviceTimeout = std::chrono::milliseconds(60000);
 
 json RunToJson(const RunOptions& o) {
@@ -54,6 +59,8 @@ json RunToJson(const RunOptions& o) {
   // The rig as it was when the session started: a resume uses the same devices and plan even
   // if the rig file changed meanwhile.
   if (o.hardware) run["rig"] = json::parse(RigConfigToJsonText(*o.hardware));
+  if (o.calibration) run["calibration"] = CalibrationPlanToJson(*o.calibration);
+  if (!o.calibration_file.empty()) run["calibration_file"] = kSessionCalibration;
   return run;
 }
 
@@ -88,6 +95,9 @@ RunOptions RunFromJson(const std::filesystem::path& path) {
     o.sim.placement.yaw_rad = s.at("yaw_rad").get<double>();
     o.texture.grouping.exclude_views = j.at("texture").at("exclude_views").get<std::vector<int>>();
     o.texture.size = j.at("texture").at("size").get<int>();
+    if (j.contains("calibration")) o.calibration = CalibrationPlanFromJson(j["calibration"], path);
+    if (j.contains("calibration_file"))
+      o.calibration_file = path.parent_path() / j["calibration_file"].get<std::string>();
   } catch (const json::exception& e) {
     throw FormatError(path, std::string("malformed: ") + e.what());
   }
@@ -134,22 +144,53 @@ bool IsCompletePhoto(const std::filesystem::path& file, const CameraModel& camer
   }
 }
 
-// The simulated rig: the product model on the simulated turntable, one simulated camera per
-// elevation.
-RigBackends OpenSimRig(const SimCaptureOptions& sim) {
+// The board placements of a simulated calibration session: the board drawn, standing on the
+// table at each lean; table_from_board per placement.
+std::vector<std::pair<std::shared_ptr<sim::Scene>, Rigid3d>> SimBoardPlacements(
+    const CalibrationPlan& plan) {
+  const calib::BoardImage drawn = calib::DrawBoard(calib::BoardSpec::Parse(plan.board), 100, 50);
+  std::vector<std::pair<std::shared_ptr<sim::Scene>, Rigid3d>> placements;
+  for (int p = 0; p < plan.placements; ++p) {
+    const Rigid3d pose =
+        sim::StandCardOnTable(drawn.board_from_pixel, drawn.image.size(),
+                              plan.sim_leans_deg[static_cast<std::size_t>(p)], 0.0);
+    placements.emplace_back(std::make_shared<sim::Scene>(sim::MakePrintedCardScene(
+                                drawn.image, drawn.board_from_pixel, pose)),
+                            pose);
+  }
+  return placements;
+}
+
+// The simulated rig: the product model (or the calibration board) on the simulated turntable,
+// one simulated camera per elevation, framed for the product.
+RigBackends OpenSimRig(const SimCaptureOptions& sim, const std::optional<CalibrationPlan>& plan) {
   auto scene = std::make_shared<sim::Scene>(sim::LoadScene(ResolveScene(sim.scene, sim.data_dir)));
   sim::PlaceOnTurntable(*scene, sim.placement);
   RigBackends rig;
   rig.cam_from_table = sim::MakeSimRig(sim.rig, scene->Bounds());
+  std::vector<std::pair<std::shared_ptr<sim::Scene>, Rigid3d>> boards;
+  if (plan) {
+    boards = SimBoardPlacements(*plan);
+    scene = boards.front().first;
+  }
   auto turntable = std::make_shared<sim::SimTurntable>(sim::SimTurntableOptions{.time_scale = 0.0});
+  std::vector<sim::SimCamera*> cameras;
   for (std::size_t c = 0; c < rig.cam_from_table.size(); ++c) {
     sim::SimCameraOptions camera_options;
     camera_options.serial = "SIM" + std::to_string(1000 + c);
     camera_options.jpeg_quality = sim.jpeg_quality;
     camera_options.render = sim.render;
     camera_options.render.seed = sim.render.seed * 1000003ULL + c;
-    rig.cameras.push_back(
-        std::make_unique<sim::SimCamera>(scene, rig.cam_from_table[c], turntable, camera_options));
+    auto camera =
+        std::make_unique<sim::SimCamera>(scene, rig.cam_from_table[c], turntable, camera_options);
+    cameras.push_back(camera.get());
+    rig.cameras.push_back(std::move(camera));
+  }
+  if (plan) {
+    rig.place_board = [cameras, boards](int index) {
+      for (sim::SimCamera* camera : cameras)
+        camera->SetScene(boards.at(static_cast<std::size_t>(index)).first);
+    };
   }
   rig.turntable = turntable;
   rig.plan.stops = sim.stops;
@@ -157,8 +198,37 @@ RigBackends OpenSimRig(const SimCaptureOptions& sim) {
   return rig;
 }
 
-RigBackends OpenRig(const RunOptions& options) {
-  return options.hardware ? OpenHardwareRig(*options.hardware) : OpenSimRig(options.sim);
+// The rig's devices; the photos' cameras from the session's calibration when it has one.
+RigBackends OpenRig(const RunOptions& options, const std::filesystem::path& calibration) {
+  RigBackends rig = options.hardware ? OpenHardwareRig(*options.hardware)
+                                     : OpenSimRig(options.sim, options.calibration);
+  if (options.hardware && options.calibration) {
+    rig.place_board = [place = options.place_board,
+                       count = options.calibration->placements](int index) {
+      if (place) place(index, count);
+    };
+  }
+  if (!calibration.empty()) {
+    const calib::RigCalibration file = calib::ReadRigCalibration(calibration);
+    if (file.cameras.size() != rig.cameras.size()) {
+      throw FormatError(calibration, "calibrates " + std::to_string(file.cameras.size()) +
+                                         " camera(s), the rig has " +
+                                         std::to_string(rig.cameras.size()));
+    }
+    for (std::size_t c = 0; c < rig.cameras.size(); ++c) {
+      const CameraModel& calibrated = file.cameras[c].camera;
+      const CameraModel& own = rig.cam_from_table[c];
+      if (calibrated.width != own.width || calibrated.height != own.height) {
+        throw FormatError(calibration, "camera " + std::to_string(c) + " was calibrated for " +
+                                           std::to_string(calibrated.width) + "x" +
+                                           std::to_string(calibrated.height) +
+                                           " photos, it takes " + std::to_string(own.width) + "x" +
+                                           std::to_string(own.height));
+      }
+      rig.cam_from_table[c] = calibrated;
+    }
+  }
+  return rig;
 }
 
 // Waits for every future; returns the results, and rethrows the first error only after all
@@ -209,7 +279,10 @@ RunResult Continue(const std::filesystem::path& folder, const RunOptions& option
   session.views.clear();
   for (const auto& [name, view] : recorded) session.views.push_back(view);
   const int cameras = static_cast<int>(rig.cameras.size());
-  const int total = plan.stops * cameras;
+  // A calibration session turns the table once per board placement.
+  const int placements = options.calibration ? options.calibration->placements : 1;
+  const int total_stops = plan.stops * placements;
+  const int total = total_stops * cameras;
   int done = static_cast<int>(recorded.size());
   auto record = [&](SessionView view) {
     view.sha256 = FileSha256(folder / view.image);
@@ -218,10 +291,13 @@ RunResult Continue(const std::filesystem::path& folder, const RunOptions& option
     WriteSessionManifest(folder, session);
     progress.Report(static_cast<std::size_t>(++done), static_cast<std::size_t>(total));
   };
-  auto angle_of = [&](int stop) { return 2.0 * std::numbers::pi * stop / plan.stops; };
+  auto angle_of = [&](int stop) {
+    return 2.0 * std::numbers::pi * (stop % plan.stops) / plan.stops;
+  };
   bool homed = false;
   int moving_to = -1;  // the stop the table was last sent to
-  for (int stop = 0; stop < plan.stops; ++stop) {
+  int placed = -1;     // the board placement in place
+  for (int stop = 0; stop < total_stops; ++stop) {
     progress.CheckCancelled();
     const double angle = angle_of(stop);
     std::vector<SessionView> to_take;
@@ -232,7 +308,7 @@ RunResult Continue(const std::filesystem::path& folder, const RunOptions& option
       view.image = image;
       view.camera = c;
       view.stop = stop;
-      view.table_angle_deg = 360.0 * stop / plan.stops;
+      view.table_angle_deg = 360.0 * (stop % plan.stops) / plan.stops;
       view.camera_model = sim::CameraAtTableAngle(rig.cam_from_table[c], angle);
       const auto file = folder / image;
       if (std::filesystem::exists(file)) {
@@ -248,6 +324,11 @@ RunResult Continue(const std::filesystem::path& folder, const RunOptions& option
       to_take.push_back(view);
     }
     if (to_take.empty()) continue;
+    if (rig.place_board && stop / plan.stops != placed) {
+      placed = stop / plan.stops;
+      CAROUSEL_LOG_INFO("board placement " << placed + 1 << " of " << placements);
+      rig.place_board(placed);
+    }
     if (!homed) {
       rig.turntable->Home(move_timeout);
       homed = true;
@@ -300,7 +381,7 @@ RunResult Continue(const std::filesystem::path& folder, const RunOptions& option
       CAROUSEL_LOG_INFO("stop " << stop << ": " << to_take.size() << " cameras triggered within "
                                 << skew_ms << " ms");
     // The table turns to the next stop while the photos download.
-    if (!error && stop + 1 < plan.stops) {
+    if (!error && stop + 1 < total_stops) {
       rig.turntable->StartMoveTo(angle_of(stop + 1));
       moving_to = stop + 1;
     }
@@ -342,11 +423,24 @@ RunResult Continue(const std::filesystem::path& folder, const RunOptions& option
       // New photos make the later stages stale.
       session.stages.erase("reconstruct");
       session.stages.erase("texture");
+      session.stages.erase("calibrate");
     }
     WriteSessionManifest(folder, session);
   }
   progress.EndStage();
   result.seconds_capture = watch.ElapsedSeconds();
+
+  // ---- a calibration session: calibrate the rig from the photos --------------------------
+  if (options.calibration) {
+    session = ReadSession(folder);
+    const auto file = folder / "calibration" / "rig_calibration.json";
+    if (session.stages["calibrate"] != "done" || !std::filesystem::is_regular_file(file)) {
+      watch = Stopwatch();
+      result.calibration = CalibrateSession(folder, {}, file, progress);
+      result.seconds_reconstruct = watch.ElapsedSeconds();
+    }
+    return result;
+  }
 
   // ---- reconstruct, texture: each skipped when current (pipeline.h) ----------------------
   ReconstructOptions reconstruct = options.reconstruct;
@@ -376,6 +470,10 @@ void RunOptions::Validate() const {
   }
   reconstruct.Validate();
   texture.Validate();
+  if (calibration) calibration->Validate();
+  CAROUSEL_THROW_IF(calibration && !calibration_file.empty(), InvalidArgument,
+                    "a calibration session does not take a calibration file");
+  if (!calibration_file.empty()) RequireReadableFile(calibration_file);
 }
 
 std::string SessionNameForProduct(const std::string& product) {
@@ -394,8 +492,14 @@ std::string SessionNameForProduct(const std::string& product) {
   return name;
 }
 
-RunResult RunSession(const RunOptions& options, Progress& progress) {
-  options.Validate();
+RunResult RunSession(const RunOptions& requested, Progress& progress) {
+  requested.Validate();
+  RunOptions options = requested;
+  if (options.calibration && !options.hardware) {
+    // The simulated board's height above the plate is known exactly.
+    options.calibration->board_origin_height_m =
+        (SimBoardPlacements(*options.calibration).front().second * Eigen::Vector3d::Zero()).z();
+  }
   const std::filesystem::path folder = options.out / SessionNameForProduct(options.product);
   std::error_code ec;
   if (std::filesystem::exists(folder, ec) && !options.force) {
@@ -404,7 +508,7 @@ RunResult RunSession(const RunOptions& options, Progress& progress) {
                   "--force starts over (the old folder is kept beside it)");
   }
   // Every device answers before anything is written: a missing camera costs nothing.
-  RigBackends rig = OpenRig(options);
+  RigBackends rig = OpenRig(options, options.calibration_file);
   if (std::filesystem::exists(folder, ec)) {
     if (!options.force)
       throw IoError(
@@ -426,10 +530,16 @@ RunResult RunSession(const RunOptions& options, Progress& progress) {
     StagedSessionFolder staged(folder, false);
     staged.CreateFolder("images");
     WriteFileAtomic(staged.staging() / kRunFile, RunToJson(options).dump(2));
+    if (!options.calibration_file.empty()) {
+      // The session keeps the calibration its photos were given, whatever happens to the file.
+      WriteFileAtomic(staged.staging() / kSessionCalibration,
+                      ReadFileBytes(options.calibration_file));
+    }
     Session session;
     session.product = options.product;
     session.created_utc = NowUtc();
-    session.source = options.hardware ? "rig" : "sim:" + options.sim.scene;
+    session.source = std::string(options.calibration ? "calibration:" : "") +
+                     (options.hardware ? "rig" : "sim:" + options.sim.scene);
     session.frame = "turntable";
     WriteSessionManifest(staged.staging(), session);
     if (options.hardware && options.hardware->backdrop == "difference") {
@@ -459,7 +569,7 @@ RunResult ResumeSession(const std::filesystem::path& session, Progress& progress
   RunOptions options = RunFromJson(session / kRunFile);
   options.out = session.parent_path();
   options.Validate();
-  RigBackends rig = OpenRig(options);
+  RigBackends rig = OpenRig(options, options.calibration_file);
   return Continue(session, options, rig, progress);
 }
 

@@ -34,8 +34,8 @@ std::vector<std::filesystem::path> OpenCvLeftImages() {
 cv::Mat PhotographBoard(const CameraModel& camera, const BoardSpec& board,
                         const Rigid3d& cam_from_board, std::uint64_t seed) {
   const BoardImage drawn = DrawBoard(board, 80, 40);
-  const sim::Scene card = sim::MakePrintedCardScene(drawn.image, drawn.board_from_pixel,
-                                                    camera.cam_from_world.Inverse() * cam_from_board);
+  const sim::Scene card = sim::MakePrintedCardScene(
+      drawn.image, drawn.board_from_pixel, camera.cam_from_world.Inverse() * cam_from_board);
   sim::RenderOptions options;
   options.plate_radius_m = 0.0;
   options.noise_sigma = 2.0;
@@ -110,7 +110,7 @@ TEST(BoardSpecTest, DrawnBoardsMapPixelsToTheBoardFrame) {
     }
     // Corners refined in a perfectly sharp drawing sit within a few tenths of a pixel.
     EXPECT_LT(worst, 0.3 * board.square_m / 60) << spec;
-    EXPECT_LT(d.edge_width_px, 1.5) << spec;                // a sharp drawing
+    EXPECT_LT(d.edge_width_px, 1.5) << spec;  // a sharp drawing
   }
 }
 
@@ -127,7 +127,7 @@ TEST(IntrinsicsTest, RecoversARenderedLensWithinTightBounds) {
   truth.distortion.k1 = -0.12;
   truth.distortion.k2 = 0.05;
   // Tilted boards spread over the image, near its corners too.
-  const double tilts[][3] = {{25, 0, 0},   {-25, 10, 5},  {0, 30, -8},  {15, -25, 12},
+  const double tilts[][3] = {{25, 0, 0},    {-25, 10, 5},  {0, 30, -8},  {15, -25, 12},
                              {-20, -20, 3}, {30, 20, -15}, {10, 10, 90}, {-15, 25, 80}};
   const Eigen::Vector3d shifts[] = {{-0.17, -0.12, 0.55}, {0.02, -0.13, 0.55}, {-0.17, 0.0, 0.6},
                                     {0.0, 0.02, 0.6},     {-0.14, -0.12, 0.7}, {-0.08, -0.06, 0.5},
@@ -156,11 +156,11 @@ TEST(IntrinsicsTest, RecoversARenderedLensWithinTightBounds) {
     const Eigen::Vector2d expected = truth.PixelFromNormalized(truth.distortion.Apply(corner_ray));
     const Eigen::Vector2d got = r.camera.PixelFromNormalized(r.camera.distortion.Apply(corner_ray));
     EXPECT_LT((got - expected).norm(), 3.0) << spec;
-    std::printf("%s, rendered lens: fx %.2f (%.2f) fy %.2f (%.2f) cx %.2f (%.2f) cy %.2f (%.2f) "
-                "k1 %.4f (%.4f) rms %.3f px; corner point off by %.2f px\n",
-                spec, r.camera.fx, truth.fx, r.camera.fy, truth.fy, r.camera.cx, truth.cx,
-                r.camera.cy, truth.cy, r.camera.distortion.k1, truth.distortion.k1, r.rms_px,
-                (got - expected).norm());
+    std::printf(
+        "%s, rendered lens: fx %.2f (%.2f) fy %.2f (%.2f) cx %.2f (%.2f) cy %.2f (%.2f) "
+        "k1 %.4f (%.4f) rms %.3f px; corner point off by %.2f px\n",
+        spec, r.camera.fx, truth.fx, r.camera.fy, truth.fy, r.camera.cx, truth.cx, r.camera.cy,
+        truth.cy, r.camera.distortion.k1, truth.distortion.k1, r.rms_px, (got - expected).norm());
   }
 }
 
@@ -175,20 +175,19 @@ TEST(IntrinsicsTest, OpenCvSamplePhotosMatchThePublishedIntrinsics) {
   Progress progress;
   IntrinsicsOptions options;
   options.fix_aspect_ratio = true;  // as the published run (flags: 2)
-  const IntrinsicsResult r =
-      CalibrateIntrinsics(OpenCvLeftImages(), BoardSpec::Parse("chessboard:9x6:0.025"), options,
-                          progress);
+  const IntrinsicsResult r = CalibrateIntrinsics(
+      OpenCvLeftImages(), BoardSpec::Parse("chessboard:9x6:0.025"), options, progress);
   EXPECT_GE(r.UsedViews(), 12);
   EXPECT_NEAR(r.camera.fx / published.fx, 1.0, 0.01);
   EXPECT_NEAR(r.camera.fy / published.fy, 1.0, 0.01);
   EXPECT_NEAR(r.camera.cx / published.cx, 1.0, 0.01);
   EXPECT_NEAR(r.camera.cy / published.cy, 1.0, 0.01);
   EXPECT_LT(r.rms_px, 0.5);
-  std::printf("OpenCV left photos: %d/%zu views, fx %.2f fy %.2f cx %.2f cy %.2f (published "
-              "%.2f %.2f %.2f %.2f), RMS %.3f px, coverage %.0f %%\n",
-              r.UsedViews(), r.views.size(), r.camera.fx, r.camera.fy, r.camera.cx, r.camera.cy,
-              published.fx, published.fy, published.cx, published.cy, r.rms_px,
-              100.0 * r.cell_coverage);
+  std::printf(
+      "OpenCV left photos: %d/%zu views, fx %.2f fy %.2f cx %.2f cy %.2f (published "
+      "%.2f %.2f %.2f %.2f), RMS %.3f px, coverage %.0f %%\n",
+      r.UsedViews(), r.views.size(), r.camera.fx, r.camera.fy, r.camera.cx, r.camera.cy,
+      published.fx, published.fy, published.cx, published.cy, r.rms_px, 100.0 * r.cell_coverage);
   for (const ViewReport& v : r.views) {
     std::printf("  %s: %s %.3f px %s\n", v.name.c_str(), v.used ? "used" : "rejected", v.rms_px,
                 v.reason.c_str());

@@ -111,13 +111,13 @@ TEST(RigCalibrationTest, RecoversTheSimulatedRigsCamerasAxisAndBoard) {
     const double centre_mm = (got.Centre() - truth.Centre()).norm() * 1e3;
     const double axis_deg = AngleBetweenDeg(calibration.cameras[c].axis_direction_cam,
                                             truth.cam_from_world.rotation.col(2));
-    std::printf("camera %zu (%d views): fx %.2f (%.2f, %+.3f %%) fy %.2f (%.2f) cx %.2f (%.2f) "
-                "cy %.2f (%.2f) k1 %.4f (%.4f); centre off %.2f mm at %.3f m; axis off %.4f deg; "
-                "RMS %.3f px\n",
-                c, calibration.cameras[c].views, got.fx, truth.fx, 100.0 * (got.fx / truth.fx - 1),
-                got.fy, truth.fy, got.cx, truth.cx, got.cy, truth.cy, got.distortion.k1,
-                truth.distortion.k1, centre_mm, truth.Centre().norm(), axis_deg,
-                calibration.cameras[c].rms_px);
+    std::printf(
+        "camera %zu (%d views): fx %.2f (%.2f, %+.3f %%) fy %.2f (%.2f) cx %.2f (%.2f) "
+        "cy %.2f (%.2f) k1 %.4f (%.4f); centre off %.2f mm at %.3f m; axis off %.4f deg; "
+        "RMS %.3f px\n",
+        c, calibration.cameras[c].views, got.fx, truth.fx, 100.0 * (got.fx / truth.fx - 1), got.fy,
+        truth.fy, got.cx, truth.cx, got.cy, truth.cy, got.distortion.k1, truth.distortion.k1,
+        centre_mm, truth.Centre().norm(), axis_deg, calibration.cameras[c].rms_px);
     // Bounds looser than the targets (those hold at full size, see the benchmark).
     EXPECT_NEAR(got.fx / truth.fx, 1.0, 0.005) << c;
     EXPECT_NEAR(got.fy / truth.fy, 1.0, 0.005) << c;
@@ -209,8 +209,8 @@ TEST(RigCalibrationTest, CamerasWithoutTheBoardAndBadPhotosAreNamedWithTheirReas
     EXPECT_THAT(what, HasSubstr("camera 2 never sees the board"));
     EXPECT_THAT(what, HasSubstr("cam2_stop3: no marker of the ChArUco board found"));
     EXPECT_THAT(what, HasSubstr("cam0_stop0: cannot be read"));
-    EXPECT_THAT(what, ::testing::AnyOf(HasSubstr("cam0_stop1: only "),
-                                       HasSubstr("cam0_stop1: no marker")));
+    EXPECT_THAT(
+        what, ::testing::AnyOf(HasSubstr("cam0_stop1: only "), HasSubstr("cam0_stop1: no marker")));
   }
   // Without the third camera the others calibrate, with every refused photo explained.
   photos.resize(32);
@@ -229,7 +229,8 @@ TEST(RigCalibrationTest, CamerasWithoutTheBoardAndBadPhotosAreNamedWithTheirReas
               ::testing::ThrowsMessage<InvalidArgument>(HasSubstr("intrinsics are for 640x")));
   // A file that is not a calibration.
   testing::TempDir dir;
-  testing::WriteBytes(dir / "bad.json", "{\"format\": \"carousel-rig-calibration\", \"version\": 1}");
+  testing::WriteBytes(dir / "bad.json",
+                      "{\"format\": \"carousel-rig-calibration\", \"version\": 1}");
   EXPECT_THAT([&] { ReadRigCalibration(dir / "bad.json"); },
               ::testing::ThrowsMessage<FormatError>(HasSubstr("created_utc")));
   EXPECT_THROW(ReadRigCalibration(dir / "none.json"), IoError);

@@ -16,6 +16,7 @@
 #include <numbers>
 #include <thread>
 
+#include "carousel/calib/rig_calibration.h"
 #include "carousel/core/error.h"
 #include "carousel/core/file_util.h"
 #include "carousel/core/progress.h"
@@ -253,6 +254,30 @@ TEST(RigConfigTest, MalformedRigFilesNameTheFieldAndTheFile) {
   EXPECT_EQ(config.backdrop, "difference");
   EXPECT_EQ(config.backgrounds, dir / "plates");  // relative to the rig file
   EXPECT_EQ(ReadRigConfig(file).cameras.size(), 1u);
+  // The cameras' calibration from a rig calibration file, camera i being its camera i.
+  calib::RigCalibration calibration;
+  calibration.created_utc = "2026-12-01T00:00:00Z";
+  calibration.board = "charuco:9x7:0.04:0.03:DICT_6X6_250";
+  calib::RigCameraCalibration calibrated;
+  calibrated.name = "cam0";
+  calibrated.serial = "032021001234";
+  calibrated.camera = config.cameras[0].calibration;
+  calibrated.camera.fx *= 1.01;
+  calibration.cameras.push_back(calibrated);
+  calib::WriteRigCalibration(dir / "calibration.json", calibration);
+  const std::string with_file =
+      "{\"format\": \"carousel-rig\", \"version\": 1, \"turntable\": {\"port\": \"/dev/ttyACM0\"}, "
+      "\"calibration_file\": \"calibration.json\", \"cameras\": [{\"port\": \"usb:001,002\"";
+  WriteFileAtomic(file, with_file + "}]}");
+  EXPECT_DOUBLE_EQ(ReadRigConfig(file).cameras[0].calibration.fx, calibrated.camera.fx);
+  EXPECT_EQ(ReadRigConfig(file).calibration_file, dir / "calibration.json");
+  WriteFileAtomic(file, with_file + ", \"serial\": \"999\"}]}");
+  EXPECT_THAT([&] { ReadRigConfig(file); },
+              ::testing::ThrowsMessage<FormatError>(HasSubstr("is the camera 999")));
+  WriteFileAtomic(file, with_file + "}, {\"port\": \"usb:001,003\"}]}");
+  EXPECT_THAT(
+      [&] { ReadRigConfig(file); },
+      ::testing::ThrowsMessage<FormatError>(HasSubstr("calibrates 1 camera(s), the rig has 2")));
   WriteFileAtomic(file, std::string("{\"version\": 2}"));
   EXPECT_THROW(ReadRigConfig(file), FormatError);
   EXPECT_THROW(ReadRigConfig(dir / "none.json"), IoError);

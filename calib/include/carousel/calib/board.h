@@ -33,11 +33,11 @@ enum class BoardKind { kChessboard, kCharuco };
 //                                     DICT_ARUCO_ORIGINAL).
 struct BoardSpec {
   BoardKind kind = BoardKind::kChessboard;
-  int cols = 9;              // chessboard: inner corners per row; charuco: squares along x
-  int rows = 6;              // chessboard: inner corners per column; charuco: squares along y
-  double square_m = 0.025;   // side of a square, metres (> 0)
-  double marker_m = 0.0;     // charuco: side of a marker, metres (0 < marker < square)
-  std::string dictionary;    // charuco: e.g. "DICT_6X6_250"
+  int cols = 9;             // chessboard: inner corners per row; charuco: squares along x
+  int rows = 6;             // chessboard: inner corners per column; charuco: squares along y
+  double square_m = 0.025;  // side of a square, metres (> 0)
+  double marker_m = 0.0;    // charuco: side of a marker, metres (0 < marker < square)
+  std::string dictionary;   // charuco: e.g. "DICT_6X6_250"
 
   // \throw InvalidArgument naming what is wrong with the text.
   static BoardSpec Parse(const std::string& text);

@@ -24,10 +24,10 @@ namespace carousel::calib {
 
 struct IntrinsicsOptions {
   DetectOptions detect;
-  int min_views = 3;                // fewer usable views is an error (>= 1)
-  bool fix_aspect_ratio = false;    // fx == fy (square pixels)
-  bool zero_tangential = false;     // p1 = p2 = 0
-  bool fix_k3 = false;              // k3 = 0 (narrow lenses; avoids over-fitting)
+  int min_views = 3;              // fewer usable views is an error (>= 1)
+  bool fix_aspect_ratio = false;  // fx == fy (square pixels)
+  bool zero_tangential = false;   // p1 = p2 = 0
+  bool fix_k3 = false;            // k3 = 0 (narrow lenses; avoids over-fitting)
   // After a first calibration, a view whose reprojection RMS exceeds
   // max(outlier_factor * median view RMS, outlier_floor_px) is rejected and the calibration
   // repeated without it (a moved board, a wrong corner order). outlier_factor <= 0: never.
@@ -37,16 +37,16 @@ struct IntrinsicsOptions {
 };
 
 struct ViewReport {
-  std::string name;      // the file (or the name given with the image)
+  std::string name;  // the file (or the name given with the image)
   bool used = false;
-  std::string reason;    // why it was rejected, when !used
-  double rms_px = 0.0;   // its reprojection RMS, when used
+  std::string reason;   // why it was rejected, when !used
+  double rms_px = 0.0;  // its reprojection RMS, when used
   int corners = 0;
 };
 
 struct IntrinsicsResult {
-  CameraModel camera;  // intrinsics and distortion; cam_from_world is the identity
-  double rms_px = 0.0; // overall reprojection RMS of the used views
+  CameraModel camera;   // intrinsics and distortion; cam_from_world is the identity
+  double rms_px = 0.0;  // overall reprojection RMS of the used views
   std::vector<ViewReport> views;
   // Coverage: the image divided into 3 x 3 cells, the fraction of cells holding at least one
   // detected corner, and whether all four corner cells do.
@@ -65,9 +65,8 @@ struct NamedImage {
 // Calibrates from photos in memory. All images must have the same size.
 // \throw InvalidArgument when fewer than options.min_views views are usable; the message lists
 // every view's reason.
-IntrinsicsResult CalibrateIntrinsics(const std::vector<NamedImage>& images,
-                                     const BoardSpec& board, const IntrinsicsOptions& options,
-                                     Progress& progress);
+IntrinsicsResult CalibrateIntrinsics(const std::vector<NamedImage>& images, const BoardSpec& board,
+                                     const IntrinsicsOptions& options, Progress& progress);
 // Calibrates from image files; a file that cannot be read is a rejected view (named, with the
 // reason), not an error, as long as enough other views remain.
 IntrinsicsResult CalibrateIntrinsics(const std::vector<std::filesystem::path>& images,
@@ -78,6 +77,10 @@ IntrinsicsResult CalibrateIntrinsics(const std::vector<std::filesystem::path>& i
 // distortion_coefficients, avg_reprojection_error, ...), written atomically.
 void WriteOpenCvIntrinsics(const std::filesystem::path& path, const IntrinsicsResult& result,
                            const BoardSpec& board);
+// A camera's intrinsics alone in the same YAML (image size, camera_matrix,
+// distortion_coefficients, avg_reprojection_error), e.g. a rig calibration's camera.
+void WriteOpenCvIntrinsics(const std::filesystem::path& path, const CameraModel& camera,
+                           double rms_px);
 // Reads camera_matrix, distortion_coefficients (4, 5 or more; only k1 k2 p1 p2 k3 are kept,
 // more is an error unless they are zero) and the image size.
 // \throw FormatError naming the file and the missing or malformed node.

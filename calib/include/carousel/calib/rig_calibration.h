@@ -35,13 +35,13 @@ namespace carousel::calib {
 inline constexpr int kRigCalibrationVersion = 1;
 
 struct RigCameraCalibration {
-  std::string name;     // "cam0", or the rig's name for the camera
-  std::string serial;   // the camera body's serial, when known
-  CameraModel camera;   // intrinsics, distortion, size; cam_from_world = cam_from_table
+  std::string name;    // "cam0", or the rig's name for the camera
+  std::string serial;  // the camera body's serial, when known
+  CameraModel camera;  // intrinsics, distortion, size; cam_from_world = cam_from_table
   Eigen::Vector3d axis_direction_cam = Eigen::Vector3d::UnitZ();  // table +Z in camera frame
   Eigen::Vector3d axis_point_cam = Eigen::Vector3d::Zero();       // table origin, camera frame
-  int views = 0;        // photos used
-  double rms_px = 0.0;  // reprojection RMS over them
+  int views = 0;                                                  // photos used
+  double rms_px = 0.0;                                            // reprojection RMS over them
 };
 
 struct StopAngle {
@@ -53,7 +53,7 @@ struct StopAngle {
 struct RigCalibration {
   int version = kRigCalibrationVersion;
   std::string created_utc;
-  std::string board;                  // BoardSpec::ToString()
+  std::string board;  // BoardSpec::ToString()
   double board_origin_height_m = 0.0;
   std::vector<RigCameraCalibration> cameras;
   double rms_px = 0.0;  // over every corner used
@@ -91,7 +91,9 @@ struct RigCalibrationOptions {
   // Intrinsics are estimated from these photos (OpenCV) and refined with the rest; with
   // `refine_intrinsics` false, given intrinsics (CalibrateRig's argument) stay fixed.
   bool refine_intrinsics = true;
-  bool fix_k3 = false;           // k3 = 0
+  // k3 = 0: a normal lens needs no r^6 term, and boards seen mostly in the middle of the image
+  // make k2 and k3 trade off wildly (k2 5, k3 -230 on the simulated rig) when both are free.
+  bool fix_k3 = true;
   bool zero_tangential = false;  // p1 = p2 = 0
   int min_views_per_camera = 4;  // usable photos each camera needs (>= 3)
   double huber_px = 1.0;         // robust loss scale, pixels (> 0)
@@ -114,16 +116,16 @@ struct RigPhotoReport {
   int camera = 0;
   int stop = 0;
   bool used = false;
-  std::string reason;   // why not, when !used
+  std::string reason;  // why not, when !used
   int corners = 0;
   double rms_px = 0.0;  // after adjustment, when used
 };
 
 struct RigCalibrationResult {
   RigCalibration calibration;
-  std::vector<RigPhotoReport> photos;  // one per input photo, in input order
+  std::vector<RigPhotoReport> photos;     // one per input photo, in input order
   std::vector<Rigid3d> table_from_board;  // where the board stood, per placement
-  int iterations = 0;                  // of the final adjustment
+  int iterations = 0;                     // of the final adjustment
   std::vector<std::string> warnings;
 };
 

@@ -108,6 +108,8 @@ class SimCamera : public rig::Camera {
 
   // The exposure gain the current settings give (1 at ISO 100, f/8, 1/125 s).
   double ExposureGain() const;
+  // What is on the table from now on (e.g. the calibration board moved to a new placement).
+  void SetScene(std::shared_ptr<const Scene> scene);
   // Renders a photo at the table's current angle with the current settings: JPEG bytes
   // (what Capture() stores on the card; the PTP/IP emulator serves these).
   std::vector<std::uint8_t> Shoot();

@@ -7,10 +7,13 @@
 //     "format": "carousel-rig", "version": 1,
 //     "turntable": {"port": "/dev/serial/by-id/usb-Carousel_TT-328-if00",
 //                   "steps_per_rev": 200, "microsteps": 16, "gear": "1:3"},   (gear optional)
+//     "calibration_file": "rig_calibration.json",   (optional: carousel calibrate rig's file;
+//                                                    camera i is the file's camera i)
 //     "cameras": [{"port": "usb:001,005", "model": "", "serial": "032021001234",
 //                  "settings": {"iso": "100", "aperture": "f/11"},
 //                  "calibration": { camera model: intrinsics, distortion, cam_from_world =
-//                                   cam_from_table at table angle 0, as in session.json }}],
+//                                   cam_from_table at table angle 0, as in session.json;
+//                                   not needed with a calibration_file }}],
 //     "capture": {"stops": 16, "settle_ms": 300, "delete_from_camera": true,
 //                 "shutter": "camera" | "controller", "shutter_pulse_ms": 100,
 //                 "move_timeout_s": 60, "camera_timeout_s": 60},
@@ -71,6 +74,9 @@ struct RigConfig {
   // With "difference": the folder holding cam<C>.jpg (or .png) per camera; a session copies
   // them into its backgrounds/ folder when it starts.
   std::filesystem::path backgrounds;
+  // The rig calibration file the cameras' calibration came from ("calibration_file" in the
+  // rig file, relative to it), when they did.
+  std::filesystem::path calibration_file;
   void Validate() const;
 };
 
@@ -90,6 +96,9 @@ struct RigBackends {
   CapturePlan plan;
   // With plan.shutter == "controller": pulses the shutter outputs of these cameras at once.
   std::function<void(const std::vector<int>& cameras)> release;
+  // Calibration sessions: puts the board in placement `index` (the simulated rig moves its
+  // board; hardware asks the operator).
+  std::function<void(int index)> place_board;
 };
 
 // Opens the turntable controller (serial) and the cameras (libgphoto2), checks the serial

@@ -16,10 +16,12 @@
 #pragma once
 
 #include <filesystem>
+#include <functional>
 #include <optional>
 #include <string>
 
 #include "carousel/core/progress.h"
+#include "carousel/studio/calibrate_session.h"
 #include "carousel/studio/checksum.h"
 #include "carousel/studio/reconstruct.h"
 #include "carousel/studio/rig_config.h"
@@ -33,6 +35,17 @@ struct RunOptions {
   std::filesystem::path out = "sessions";  // parent folder
   SimCaptureOptions sim;                   // scene, rig, stops, renderer (the simulated backend)
   std::optional<RigConfig> hardware;       // set: capture with this rig's devices instead
+  // Set: a calibration session: the table turns with the board on it, once per placement
+  // (the simulated rig places its board itself; on hardware `place_board` asks the operator),
+  // and the photos are calibrated into <session>/calibration/rig_calibration.json instead of
+  // reconstructed. The simulated rig is framed as for `sim.scene`.
+  std::optional<CalibrationPlan> calibration;
+  // Hardware calibration sessions: called before the table turns for placement `index`
+  // (0-based) once the board must stand there; it returns when it does.
+  std::function<void(int index, int placements)> place_board;
+  // A rig calibration file (calib/rig_calibration.h) whose cameras the photos get instead of
+  // the rig's own (the simulator's ground truth, or rig.json's); copied into the session.
+  std::filesystem::path calibration_file;
   ReconstructOptions reconstruct;
   TextureSessionOptions texture;
   bool force = false;  // replace an existing session of that name
@@ -48,6 +61,7 @@ struct RunResult {
   double max_trigger_skew_ms = 0.0;  // largest spread of the cameras' triggers at a stop
   bool reconstructed = false, textured = false;  // stages run (not skipped) this time
   TextureSessionResult texture;
+  std::optional<CalibrateSessionResult> calibration;  // calibration sessions, when it ran
   double seconds_capture = 0.0, seconds_reconstruct = 0.0, seconds_texture = 0.0;
 };
 
