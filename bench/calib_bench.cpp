@@ -89,23 +89,25 @@ void Accuracy(int width, int height, int stops, double distance) {
   const calib::RigCalibration& c = result.calibration;
   int used = 0;
   for (const calib::RigPhotoReport& p : result.photos) used += p.used;
-  std::printf("rig calibration at %dx%d, %zu cameras, 2 placements x %d stops: %d of %zu photos "
-              "used, %d corners, RMS %.3f px (goal < 0.3)\n",
-              width, height, truth.size(), stops, used, photos.size(), c.corners, c.rms_px);
+  std::printf(
+      "rig calibration at %dx%d, %zu cameras, 2 placements x %d stops: %d of %zu photos "
+      "used, %d corners, RMS %.3f px (goal < 0.3)\n",
+      width, height, truth.size(), stops, used, photos.size(), c.corners, c.rms_px);
   for (std::size_t i = 0; i < truth.size(); ++i) {
     const CameraModel& t = truth[i];
     const CameraModel& e = c.cameras[i].camera;
-    std::printf("  camera %zu (%.0f deg, %.3f m): fx %+.3f %% fy %+.3f %% (goal 0.2), cx %+.2f px "
-                "cy %+.2f px (goal 1), centre %.3f mm (goal 1), axis %.4f deg (goal 0.05), "
-                "RMS %.3f px\n",
-                i, rig.elevations_deg[i], t.Centre().norm(), 100.0 * (e.fx / t.fx - 1.0),
-                100.0 * (e.fy / t.fy - 1.0), e.cx - t.cx, e.cy - t.cy,
-                (e.Centre() - t.Centre()).norm() * 1e3,
-                AngleDeg(c.cameras[i].axis_direction_cam, t.cam_from_world.rotation.col(2)),
-                c.cameras[i].rms_px);
+    std::printf(
+        "  camera %zu (%.0f deg, %.3f m): fx %+.3f %% fy %+.3f %% (goal 0.2), cx %+.2f px "
+        "cy %+.2f px (goal 1), centre %.3f mm (goal 1), axis %.4f deg (goal 0.05), "
+        "RMS %.3f px\n",
+        i, rig.elevations_deg[i], t.Centre().norm(), 100.0 * (e.fx / t.fx - 1.0),
+        100.0 * (e.fy / t.fy - 1.0), e.cx - t.cx, e.cy - t.cy,
+        (e.Centre() - t.Centre()).norm() * 1e3,
+        AngleDeg(c.cameras[i].axis_direction_cam, t.cam_from_world.rotation.col(2)),
+        c.cameras[i].rms_px);
   }
-  std::printf("  table angles: observed/reported %.5f, largest deviation %.4f deg\n",
-              c.angle_scale, c.angle_residual_max_deg);
+  std::printf("  table angles: observed/reported %.5f, largest deviation %.4f deg\n", c.angle_scale,
+              c.angle_residual_max_deg);
   std::printf("  time: rendering %.1f s, calibration %.2f s (detection and adjustment)\n",
               seconds_render, seconds_calibrate);
 }
@@ -126,9 +128,10 @@ void Pipeline(int width, int height, const std::filesystem::path& work) {
   calibration.calibration = studio::CalibrationPlan{};
   const studio::RunResult calibrated = studio::RunSession(calibration, progress);
   const calib::RigCalibration& c = calibrated.calibration->result.calibration;
-  std::printf("calibration session (shoe framing, 1 camera, 2 placements x 24 stops): RMS %.3f "
-              "px, %.1f s\n",
-              c.rms_px, watch.ElapsedSeconds());
+  std::printf(
+      "calibration session (shoe framing, 1 camera, 2 placements x 24 stops): RMS %.3f "
+      "px, %.1f s\n",
+      c.rms_px, watch.ElapsedSeconds());
   double psnr[2] = {0, 0};
   for (int k = 0; k < 2; ++k) {
     studio::RunOptions product = base;

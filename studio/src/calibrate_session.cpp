@@ -23,9 +23,9 @@ void CalibrationPlan::Validate() const {
   calib::BoardSpec::Parse(board);
   CAROUSEL_THROW_IF(placements < 1 || placements > 8, InvalidArgument,
                     "a calibration takes 1..8 board placements, not " << placements);
-  CAROUSEL_THROW_IF(static_cast<int>(sim_leans_deg.size()) < placements, InvalidArgument,
-                    "the simulated calibration needs a lean for each of its " << placements
-                                                                              << " placements");
+  CAROUSEL_THROW_IF(
+      static_cast<int>(sim_leans_deg.size()) < placements, InvalidArgument,
+      "the simulated calibration needs a lean for each of its " << placements << " placements");
   for (const double lean : sim_leans_deg) {
     CAROUSEL_THROW_IF(!(lean >= 0 && lean <= 80), InvalidArgument,
                       "a board lean must be 0..80 degrees from vertical, not " << lean);

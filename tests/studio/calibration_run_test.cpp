@@ -64,9 +64,9 @@ TEST(CalibrationRunTest, AnEstimatedCalibrationTexturesWithinHalfADecibelOfTheTr
   EXPECT_THAT(r.out, HasSubstr("0 photos taken, 32 kept from before"));
 
   // The same product session with the simulator's exact cameras and with the estimated ones.
-  const std::vector<std::string> product = {"run",   "--sim", "--size",          "960x640",
-                                            "--views", "8",   "--exclude-views", "2",
-                                            "--out",   out,   "--data",          data};
+  const std::vector<std::string> product = {"run",     "--sim", "--size",          "960x640",
+                                            "--views", "8",     "--exclude-views", "2",
+                                            "--out",   out,     "--data",          data};
   std::vector<std::string> truth = product;
   truth.insert(truth.end(), {"--product", "truth"});
   ASSERT_EQ(Carousel(truth).code, 0);
