@@ -47,6 +47,22 @@ ViewsCalibration CalibrateViews(const std::vector<BoardView>& views, const cv::S
   return c;
 }
 
+CameraModel CameraFromCv(const cv::Mat& k, const cv::Mat& d, const cv::Size& size) {
+  CameraModel camera;
+  camera.width = size.width;
+  camera.height = size.height;
+  camera.fx = k.at<double>(0, 0);
+  camera.fy = k.at<double>(1, 1);
+  camera.cx = k.at<double>(0, 2);
+  camera.cy = k.at<double>(1, 2);
+  camera.distortion.k1 = d.at<double>(0);
+  camera.distortion.k2 = d.at<double>(1);
+  camera.distortion.p1 = d.at<double>(2);
+  camera.distortion.p2 = d.at<double>(3);
+  if (d.total() > 4) camera.distortion.k3 = d.at<double>(4);
+  return camera;
+}
+
 double Median(std::vector<double> values) {
   if (values.empty()) return 0.0;
   const auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);

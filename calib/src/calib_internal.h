@@ -8,6 +8,7 @@
 #include <opencv2/core.hpp>
 
 #include "carousel/calib/board.h"
+#include "carousel/core/camera_model.h"
 
 namespace carousel::calib::internal {
 
@@ -29,6 +30,9 @@ struct ViewsCalibration {
 // cv::calibrateCamera over the views (planar boards; OpenCV's flags).
 ViewsCalibration CalibrateViews(const std::vector<BoardView>& views, const cv::Size& size,
                                 int flags);
+
+// A camera from OpenCV's camera matrix and 4 or 5 distortion coefficients (k3 = 0 when 4).
+CameraModel CameraFromCv(const cv::Mat& k, const cv::Mat& d, const cv::Size& size);
 
 double Median(std::vector<double> values);
 std::string Fixed(double value, int digits);

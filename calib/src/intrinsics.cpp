@@ -148,19 +148,8 @@ IntrinsicsResult CalibrateIntrinsics(const std::vector<NamedImage>& images, cons
     report.rms_px = per_view[i];
   }
   result.rms_px = rms;
-  CameraModel& camera = result.camera;
-  camera.width = size.width;
-  camera.height = size.height;
-  camera.fx = k.at<double>(0, 0);
-  camera.fy = k.at<double>(1, 1);
-  camera.cx = k.at<double>(0, 2);
-  camera.cy = k.at<double>(1, 2);
-  camera.distortion.k1 = d.at<double>(0);
-  camera.distortion.k2 = d.at<double>(1);
-  camera.distortion.p1 = d.at<double>(2);
-  camera.distortion.p2 = d.at<double>(3);
-  camera.distortion.k3 = d.at<double>(4);
-  camera.Validate();
+  result.camera = internal::CameraFromCv(k, d, size);
+  result.camera.Validate();
 
   // Coverage of the image by the used corners, 3 x 3 cells.
   std::array<bool, 9> seen{};
@@ -310,15 +299,7 @@ CameraModel ReadOpenCvIntrinsics(const std::filesystem::path& path) {
                         "thin-prism model) are not supported");
     }
   }
-  camera.fx = k.at<double>(0, 0);
-  camera.fy = k.at<double>(1, 1);
-  camera.cx = k.at<double>(0, 2);
-  camera.cy = k.at<double>(1, 2);
-  camera.distortion.k1 = d.at<double>(0);
-  camera.distortion.k2 = d.at<double>(1);
-  camera.distortion.p1 = d.at<double>(2);
-  camera.distortion.p2 = d.at<double>(3);
-  if (d.total() > 4) camera.distortion.k3 = d.at<double>(4);
+  camera = internal::CameraFromCv(k, d, cv::Size(camera.width, camera.height));
   try {
     camera.Validate();
   } catch (const InvalidArgument& e) {

@@ -19,6 +19,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <deque>
+#include <filesystem>
 #include <functional>
 #include <future>
 #include <mutex>
@@ -227,10 +228,13 @@ double LabelNumber(std::string label) {
   const std::size_t slash = label.find('/');
   char* end = nullptr;
   if (slash != std::string::npos) {
-    const double a = std::strtod(label.substr(0, slash).c_str(), &end);
-    if (*end != '\0') return std::nan("");
-    const double b = std::strtod(label.substr(slash + 1).c_str(), &end);
-    if (*end != '\0' || b == 0) return std::nan("");
+    // `end` points into the parsed text: it must outlive the check.
+    const std::string numerator = label.substr(0, slash);
+    const std::string denominator = label.substr(slash + 1);
+    const double a = std::strtod(numerator.c_str(), &end);
+    if (numerator.empty() || *end != '\0') return std::nan("");
+    const double b = std::strtod(denominator.c_str(), &end);
+    if (denominator.empty() || *end != '\0' || b == 0) return std::nan("");
     return a / b;
   }
   const double v = std::strtod(label.c_str(), &end);
@@ -299,9 +303,26 @@ std::string GPhotoVersion() {
   return std::string("libgphoto2 ") + (version && version[0] ? version[0] : "?");
 }
 
+// Loads every libgphoto2 port driver for good before detection, which opens and closes them
+// (so that a leak report can name the frames of a driver that leaks while detecting). The
+// drivers are where libgphoto2_port looks: $IOLIBS, else its install folder.
+void LoadPortDriversForGood() {
+  const char* env = std::getenv("IOLIBS");
+  const std::filesystem::path folder =
+      env != nullptr && *env != '\0' ? std::filesystem::path(env)
+                                     : std::filesystem::path(CAROUSEL_GPHOTO2_PORT_DRIVER_DIR);
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator(folder, ec)) {
+    if (entry.path().extension() == ".so") {
+      ::dlopen(entry.path().c_str(), RTLD_NOW | RTLD_NODELETE);
+    }
+  }
+}
+
 std::vector<DetectedCamera> DetectGPhotoCameras() {
   std::lock_guard<std::mutex> lock(LibraryMutex());
   KeepFdZeroOccupied();
+  LoadPortDriversForGood();
   CameraList* list = nullptr;
   gp_list_new(&list);
   GPContext* context = gp_context_new();
