@@ -4,6 +4,7 @@
 #include <cmath>
 #include <map>
 #include <sstream>
+#include <type_traits>
 
 #include <Eigen/QR>
 #include <opencv2/aruco/charuco.hpp>
@@ -51,31 +52,23 @@ cv::Ptr<cv::aruco::CharucoBoard> Charuco(const BoardSpec& board) {
                                          static_cast<float>(board.marker_m), Dictionary(board));
 }
 
-int WholeNumber(const std::string& text, const std::string& what, const std::string& spec) {
+// A field of a board's text: a whole number, or a number of metres.
+template <typename T>
+T ParseField(const std::string& text, const std::string& what, const std::string& spec) {
   std::size_t used = 0;
-  int value = 0;
+  T value{};
   try {
-    value = std::stoi(text, &used);
+    if constexpr (std::is_integral_v<T>) {
+      value = std::stoi(text, &used);
+    } else {
+      value = std::stod(text, &used);
+    }
   } catch (const std::exception&) {
     used = 0;
   }
-  CAROUSEL_THROW_IF(
-      used == 0 || used != text.size(), InvalidArgument,
-      "board \"" << spec << "\": " << what << " \"" << text << "\" is not a whole number");
-  return value;
-}
-
-double Metres(const std::string& text, const std::string& what, const std::string& spec) {
-  std::size_t used = 0;
-  double value = 0;
-  try {
-    value = std::stod(text, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  CAROUSEL_THROW_IF(
-      used == 0 || used != text.size(), InvalidArgument,
-      "board \"" << spec << "\": " << what << " \"" << text << "\" is not a number (metres)");
+  CAROUSEL_THROW_IF(used == 0 || used != text.size(), InvalidArgument,
+                    "board \"" << spec << "\": " << what << " \"" << text << "\" is not "
+                               << (std::is_integral_v<T> ? "a whole number" : "a number (metres)"));
   return value;
 }
 
@@ -261,11 +254,11 @@ BoardSpec BoardSpec::Parse(const std::string& text) {
                     "board \"" << text << "\": the size must read COLSxROWS, e.g. 9x6");
   BoardSpec board;
   board.kind = chessboard ? BoardKind::kChessboard : BoardKind::kCharuco;
-  board.cols = WholeNumber(parts[1].substr(0, x), "the column count", text);
-  board.rows = WholeNumber(parts[1].substr(x + 1), "the row count", text);
-  board.square_m = Metres(parts[2], "the square size", text);
+  board.cols = ParseField<int>(parts[1].substr(0, x), "the column count", text);
+  board.rows = ParseField<int>(parts[1].substr(x + 1), "the row count", text);
+  board.square_m = ParseField<double>(parts[2], "the square size", text);
   if (charuco) {
-    board.marker_m = Metres(parts[3], "the marker size", text);
+    board.marker_m = ParseField<double>(parts[3], "the marker size", text);
     board.dictionary = parts[4];
   }
   try {

@@ -43,12 +43,6 @@ Intrinsics ToIntrinsics(const CameraModel& c) {
   return {c.fx, c.fy, c.cx, c.cy, d.k1, d.k2, d.p1, d.p2, d.k3};
 }
 
-Intrinsics ToIntrinsics(const cv::Mat& k, const cv::Mat& d) {
-  return {k.at<double>(0, 0), k.at<double>(1, 1), k.at<double>(0, 2),
-          k.at<double>(1, 2), d.at<double>(0),    d.at<double>(1),
-          d.at<double>(2),    d.at<double>(3),    d.at<double>(4)};
-}
-
 Pose ToPose(const Rigid3d& r) {
   Pose p{};
   const Eigen::Matrix3d m = r.rotation;  // column-major, as ceres expects
@@ -373,7 +367,8 @@ RigCalibrationResult CalibrateRig(const std::vector<RigPhoto>& inputs, const Boa
       for (const Photo* p : of) views.push_back(p->view);
       const internal::ViewsCalibration calibrated =
           internal::CalibrateViews(views, camera_size[static_cast<std::size_t>(c)], flags);
-      intr[static_cast<std::size_t>(c)] = ToIntrinsics(calibrated.k, calibrated.d);
+      intr[static_cast<std::size_t>(c)] = ToIntrinsics(internal::CameraFromCv(
+          calibrated.k, calibrated.d, camera_size[static_cast<std::size_t>(c)]));
       for (std::size_t j = 0; j < of.size(); ++j) {
         of[j]->cam_from_board = FromCv(calibrated.rvecs[j], calibrated.tvecs[j]);
       }

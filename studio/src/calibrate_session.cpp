@@ -1,6 +1,7 @@
 #include "carousel/studio/calibrate_session.h"
 
 #include <fstream>
+#include <numbers>
 
 #include <nlohmann/json.hpp>
 
@@ -14,8 +15,6 @@ namespace carousel::studio {
 namespace {
 
 using json = nlohmann::json;
-
-constexpr double kPi = 3.14159265358979323846;
 
 }  // namespace
 
@@ -113,7 +112,7 @@ CalibrateSessionResult CalibrateSession(const std::filesystem::path& folder,
     photo.camera = v.camera;
     photo.stop = v.stop;
     photo.placement = v.stop / stops;
-    photo.table_angle_rad = v.table_angle_deg * kPi / 180.0;
+    photo.table_angle_rad = v.table_angle_deg * std::numbers::pi / 180.0;
     photo.path = folder / v.image;
     photos.push_back(photo);
   }
