@@ -122,6 +122,255 @@ void SmoothChartBoundaries(const FaceGraph& g, std::vector<int>* chart_of, int p
   }
 }
 
+// Per face, the area-weighted normal of itself and its neighbours: a sliver's own normal is
+// noise.
+std::vector<Eigen::Vector3d> SmoothedNormals(const FaceGraph& g) {
+  std::vector<Eigen::Vector3d> normals(g.faces.size());
+  for (std::size_t f = 0; f < g.faces.size(); ++f) {
+    Eigen::Vector3d sum = g.areas[f] * g.normals[f];
+    for (const int next : g.neighbours[f])
+      if (next >= 0) sum += g.areas[next] * g.normals[next];
+    const double norm = sum.norm();
+    normals[f] = norm > 0.0 ? Eigen::Vector3d(sum / norm) : g.normals[f];
+  }
+  return normals;
+}
+
+// Re-cuts the boundary between two neighbouring charts along the shortest edge path between
+// its ends (the corners where a third chart or the mesh's boundary meets them), through the
+// two charts' interior. Growth leaves boundaries that wander with the noise; straight ones
+// flatten into charts with straight sides, which pack far tighter. A pair is re-cut only when
+// it shares one arc, both charts stay disks and every face that changes chart lies within
+// the normal bound of its new chart. Faces with chart < 0 are left alone.
+class BoundaryRecutter {
+ public:
+  BoundaryRecutter(const FaceGraph& g, std::vector<Eigen::Vector3d> normals,
+                   double max_deviation_deg, std::vector<int>* chart_of)
+      : g_(g),
+        normals_(std::move(normals)),
+        min_dot_(std::cos(max_deviation_deg * std::numbers::pi / 180.0)),
+        of_(*chart_of) {
+    int charts = 0;
+    for (const int c : of_) charts = std::max(charts, c + 1);
+    faces_of_.resize(charts);
+    for (int f = 0; f < g_.face_count(); ++f)
+      if (of_[f] >= 0) faces_of_[of_[f]].push_back(f);
+    region_.assign(g_.face_count(), 0);
+    component_.assign(g_.face_count(), -1);
+    vertex_stamp_.assign(g_.vertex_count(), 0);
+    degree_.assign(g_.vertex_count(), 0);
+    distance_.assign(g_.vertex_count(), 0.0);
+    previous_.assign(g_.vertex_count(), -1);
+    path_index_.assign(g_.vertex_count(), -1);
+  }
+
+  // Re-cuts every pair of neighbouring charts once; returns the number re-cut.
+  int RecutAll(Progress& progress) {
+    std::vector<std::pair<int, int>> pairs;
+    for (int f = 0; f < g_.face_count(); ++f)
+      for (const int next : g_.neighbours[f])
+        if (next >= 0 && of_[f] >= 0 && of_[next] > of_[f]) pairs.emplace_back(of_[f], of_[next]);
+    std::sort(pairs.begin(), pairs.end());
+    pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+    int recut = 0;
+    for (const auto& [a, b] : pairs) {
+      progress.CheckCancelled();
+      recut += Recut(a, b) ? 1 : 0;
+    }
+    return recut;
+  }
+
+ private:
+  bool Recut(int a, int b) {
+    // The shared edges must form one open arc u .. v of at least two edges.
+    const int arc_mark = ++vertex_mark_;
+    std::vector<int> touched;
+    int edges = 0;
+    for (const int f : faces_of_[a])
+      for (int k = 0; k < 3; ++k) {
+        const int next = g_.neighbours[f][k];
+        if (next < 0 || of_[next] != b) continue;
+        ++edges;
+        for (const int v : {g_.faces[f][k], g_.faces[f][(k + 1) % 3]}) {
+          if (vertex_stamp_[v] != arc_mark) {
+            vertex_stamp_[v] = arc_mark;
+            degree_[v] = 0;
+            touched.push_back(v);
+          }
+          ++degree_[v];
+        }
+      }
+    std::vector<int> ends;
+    for (const int v : touched) {
+      if (degree_[v] > 2) return false;
+      if (degree_[v] == 1) ends.push_back(v);
+    }
+    if (ends.size() != 2 || edges != static_cast<int>(touched.size()) - 1 || edges < 2)
+      return false;
+    const int region = ++region_id_;
+    for (const int f : faces_of_[a]) region_[f] = region;
+    for (const int f : faces_of_[b]) region_[f] = region;
+    const std::vector<int> path = ShortestPath(ends[0], ends[1]);
+    if (path.empty()) return false;
+    const int path_mark = ++vertex_mark_;
+    for (std::size_t i = 0; i < path.size(); ++i) {
+      vertex_stamp_[path[i]] = path_mark;
+      path_index_[path[i]] = static_cast<int>(i);
+    }
+    auto on_path = [&](int x, int y) {
+      return vertex_stamp_[x] == path_mark && vertex_stamp_[y] == path_mark &&
+             std::abs(path_index_[x] - path_index_[y]) == 1;
+    };
+    // The two sides of the path: flood fill across the region's other edges.
+    std::vector<int> region_faces = faces_of_[a];
+    region_faces.insert(region_faces.end(), faces_of_[b].begin(), faces_of_[b].end());
+    for (const int f : region_faces) component_[f] = -1;
+    std::vector<double> area_of_a;  // per component, the area it takes from chart a
+    std::vector<double> area;
+    std::vector<int> stack;
+    for (const int start : region_faces) {
+      if (component_[start] >= 0) continue;
+      const int c = static_cast<int>(area.size());
+      if (c == 2) return false;
+      area.push_back(0.0);
+      area_of_a.push_back(0.0);
+      component_[start] = c;
+      stack.push_back(start);
+      while (!stack.empty()) {
+        const int f = stack.back();
+        stack.pop_back();
+        area[c] += g_.areas[f] + 1e-30;
+        if (of_[f] == a) area_of_a[c] += g_.areas[f] + 1e-30;
+        for (int k = 0; k < 3; ++k) {
+          const int next = g_.neighbours[f][k];
+          if (next < 0 || region_[next] != region || component_[next] >= 0) continue;
+          if (on_path(g_.faces[f][k], g_.faces[f][(k + 1) % 3])) continue;
+          component_[next] = c;
+          stack.push_back(next);
+        }
+      }
+    }
+    if (area.size() != 2) return false;
+    const int side_a = area_of_a[0] / area[0] >= area_of_a[1] / area[1] ? 0 : 1;
+    // The faces that change chart must suit their new chart's normal (on average: a sliver's
+    // normal is noise even smoothed).
+    std::vector<int> new_a;
+    std::vector<int> new_b;
+    std::vector<int> to_a;
+    std::vector<int> to_b;
+    for (const int f : region_faces) {
+      const bool in_a = component_[f] == side_a;
+      (in_a ? new_a : new_b).push_back(f);
+      if (in_a != (of_[f] == a)) (in_a ? to_a : to_b).push_back(f);
+    }
+    if ((to_a.empty() && to_b.empty()) || new_a.empty() || new_b.empty()) return false;
+    if (!to_a.empty() && MeanNormal(to_a).dot(MeanNormal(faces_of_[a])) < min_dot_) return false;
+    if (!to_b.empty() && MeanNormal(to_b).dot(MeanNormal(faces_of_[b])) < min_dot_) return false;
+    for (const int f : new_a) component_[f] = 0;
+    for (const int f : new_b) component_[f] = 1;
+    if (!IsDisk(new_a, 0) || !IsDisk(new_b, 1)) return false;
+    for (const int f : new_a) of_[f] = a;
+    for (const int f : new_b) of_[f] = b;
+    faces_of_[a] = std::move(new_a);
+    faces_of_[b] = std::move(new_b);
+    return true;
+  }
+
+  // Shortest edge path u .. v through the region's inside (Dijkstra, edge lengths), or empty.
+  std::vector<int> ShortestPath(int u, int v) {
+    using Item = std::pair<double, int>;
+    std::priority_queue<Item, std::vector<Item>, std::greater<>> queue;
+    const int region = region_id_;
+    const int search = ++vertex_mark_;
+    // Inside the region: the whole fan in it, not on the mesh's boundary.
+    auto inside = [&](int x) {
+      if (g_.boundary_vertex[x]) return false;
+      for (int i = g_.fan_start[x]; i < g_.fan_start[x + 1]; ++i)
+        if (region_[g_.fan[i]] != region) return false;
+      return true;
+    };
+    auto relax = [&](int x, double d, int from) {
+      if (vertex_stamp_[x] == search && distance_[x] <= d) return;
+      vertex_stamp_[x] = search;
+      distance_[x] = d;
+      previous_[x] = from;
+      queue.emplace(d, x);
+    };
+    relax(u, 0.0, -1);
+    bool reached = false;
+    while (!queue.empty()) {
+      const auto [d, w] = queue.top();
+      queue.pop();
+      if (d > distance_[w]) continue;
+      if (w == v) {
+        reached = true;
+        break;
+      }
+      if (w != u && !inside(w)) continue;
+      for (int i = g_.fan_start[w]; i < g_.fan_start[w + 1]; ++i) {
+        const int f = g_.fan[i];
+        if (region_[f] != region) continue;
+        for (const int x : g_.faces[f]) {
+          if (x == w) continue;
+          // From a corner, the first step must enter the inside (the arc is not a shortcut).
+          if (w == u && x != v && !inside(x)) continue;
+          if (w == u && x == v) continue;
+          relax(x, d + (g_.positions[x] - g_.positions[w]).norm(), w);
+        }
+      }
+    }
+    std::vector<int> path;
+    if (!reached) return path;
+    for (int x = v; x >= 0; x = previous_[x]) path.push_back(x);
+    std::reverse(path.begin(), path.end());
+    return path;
+  }
+
+  Eigen::Vector3d MeanNormal(const std::vector<int>& faces) const {
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    for (const int f : faces) sum += g_.areas[f] * normals_[f];
+    const double norm = sum.norm();
+    return norm > 0.0 ? Eigen::Vector3d(sum / norm) : sum;
+  }
+
+  // Whether `faces` (connected across edges, each with component_ == `side`) is a disk: its
+  // Euler characteristic V - E + F is 1 (a pinched vertex or a handle lowers it).
+  bool IsDisk(const std::vector<int>& faces, int side) {
+    const int mark = ++vertex_mark_;
+    long vertices = 0;
+    long boundary_edges = 0;
+    for (const int f : faces) {
+      for (int k = 0; k < 3; ++k) {
+        const int v = g_.faces[f][k];
+        if (vertex_stamp_[v] != mark) {
+          vertex_stamp_[v] = mark;
+          ++vertices;
+        }
+        const int next = g_.neighbours[f][k];
+        if (next < 0 || region_[next] != region_id_ || component_[next] != side) ++boundary_edges;
+      }
+    }
+    const long face_count = static_cast<long>(faces.size());
+    const long edge_count = (3 * face_count + boundary_edges) / 2;
+    return vertices - edge_count + face_count == 1;
+  }
+
+  const FaceGraph& g_;
+  std::vector<Eigen::Vector3d> normals_;
+  double min_dot_;
+  std::vector<int>& of_;
+  std::vector<std::vector<int>> faces_of_;
+  int region_id_ = 0;
+  int vertex_mark_ = 0;
+  std::vector<int> region_;        // == region_id_: the face belongs to the pair being re-cut
+  std::vector<int> component_;     // side of the path
+  std::vector<int> vertex_stamp_;  // stamp of the vertex arrays below
+  std::vector<int> degree_;
+  std::vector<double> distance_;
+  std::vector<int> previous_;
+  std::vector<int> path_index_;
+};
+
 struct Entry {
   double cost;
   int face;
@@ -140,16 +389,7 @@ class ChartGrower {
     for (const double a : g_.areas) total_area += a;
     scale_ = std::sqrt(std::max(total_area, 1e-30) /
                        std::max(options.seeds, g_.face_count() / options.faces_per_seed));
-    // A sliver's own normal is noise: faces are judged by the area-weighted normal of
-    // themselves and their neighbours.
-    normals_.resize(g_.faces.size());
-    for (std::size_t f = 0; f < g_.faces.size(); ++f) {
-      Eigen::Vector3d sum = g_.areas[f] * g_.normals[f];
-      for (const int next : g_.neighbours[f])
-        if (next >= 0) sum += g_.areas[next] * g_.normals[next];
-      const double norm = sum.norm();
-      normals_[f] = norm > 0.0 ? Eigen::Vector3d(sum / norm) : g_.normals[f];
-    }
+    normals_ = SmoothedNormals(g_);
   }
 
   // Grows charts from `seeds` (chart i from seeds[i]) over the whole mesh, or over `region`
@@ -380,6 +620,10 @@ ChartsResult ComputeCharts(const Mesh& mesh, const ChartOptions& options, Progre
     }
     seeds = std::move(upgraded);
   }
+  SmoothChartBoundaries(graph, &result.chart_of_face, kSmoothingPasses);
+  BoundaryRecutter recutter(graph, SmoothedNormals(graph), options.max_normal_deviation_deg,
+                            &result.chart_of_face);
+  result.boundaries_recut = recutter.RecutAll(progress);
   SmoothChartBoundaries(graph, &result.chart_of_face, kSmoothingPasses);
   progress.EndStage();
   result.seconds = stopwatch.ElapsedSeconds();

@@ -12,9 +12,12 @@
 // of the last ring is its new seed; all charts regrow from the new seeds until no seed moves.
 // Costs are evaluated lazily: an entry whose chart normal changed since it was queued is
 // re-queued with its current cost when it reaches the top of the heap. Finally the chart
-// boundaries are straightened: a face sharing more edges with a neighbouring chart than with
-// its own moves there when both stay disks (noise leaves ragged boundaries that flatten and
-// pack badly).
+// boundaries are straightened, as our extension (noise leaves ragged boundaries that flatten
+// into ragged charts, which pack badly): the boundary two charts share is re-cut along the
+// shortest edge path between its two ends (the corners where a third chart meets them), when
+// both stay disks and the faces that change chart suit their new chart's normal; and a face
+// sharing more edges with a neighbouring chart than with its own moves there when both stay
+// disks.
 #pragma once
 
 #include <cstdint>
@@ -30,7 +33,7 @@ struct ChartOptions {
   int seeds = 10;
   // ... but at least one per this many faces, >= 100: the paper's meshes have 4,500 faces; on
   // a 200k-face reconstruction 10 charts would be huge, slow to flatten and hard to pack.
-  int faces_per_seed = 2500;
+  int faces_per_seed = 1250;
   // A face joins a chart only if its normal is within this angle of the chart's mean normal,
   // degrees, (0, 180]; 180 = the paper's unbounded growth.
   double max_normal_deviation_deg = 70.0;
@@ -47,8 +50,9 @@ struct ChartOptions {
 struct ChartsResult {
   std::vector<int> chart_of_face;  // per face, 0 .. charts - 1
   int charts = 0;
-  int iterations = 0;      // growths run (1 + seed upgrades)
-  bool converged = false;  // the seeds stopped moving
+  int iterations = 0;        // growths run (1 + seed upgrades)
+  bool converged = false;    // the seeds stopped moving
+  int boundaries_recut = 0;  // chart pairs whose shared boundary was re-cut straight
   double seconds = 0.0;
 };
 
