@@ -6,6 +6,7 @@
 #include <map>
 #include <numbers>
 #include <numeric>
+#include <random>
 #include <string>
 #include <tuple>
 
@@ -18,29 +19,24 @@
 namespace carousel::texture {
 namespace {
 
-// A chart turned into its box: its corners' positions relative to the box's lower corner.
-struct Placed {
-  std::vector<int> faces;
-  // Boundary edges in the box frame (metres): the chart is a filled disk, so its extent in
-  // any vertical slab is reached on its boundary.
+// One way to lay a chart in the atlas: a rotation (orientation kept) and the chart's outline
+// in the frame of its rotated bounding box (lower corner at 0).
+struct Pose {
+  Eigen::Matrix2d rotation = Eigen::Matrix2d::Identity();
+  Eigen::Vector2d lower = Eigen::Vector2d::Zero();  // box corner in the rotated frame
+  Eigen::Vector2d size = Eigen::Vector2d::Zero();   // metres
+  // Boundary edges, box frame (metres): the chart is a filled disk, so its extent in any
+  // vertical slab is reached on its boundary.
   std::vector<std::array<Eigen::Vector2d, 2>> outline;
-  Eigen::Vector2d size = Eigen::Vector2d::Zero();  // metres
-  double area = 0.0;                               // flattened area, m^2
 };
 
-// The chart turned by `quarter` quarter turns inside its box (a rotation: orientation kept).
-Eigen::Vector2d Turn(const Eigen::Vector2d& p, const Eigen::Vector2d& size, int quarter) {
-  switch (quarter) {
-    case 1:
-      return {size.y() - p.y(), p.x()};
-    case 2:
-      return {size.x() - p.x(), size.y() - p.y()};
-    case 3:
-      return {p.y(), size.x() - p.x()};
-    default:
-      return p;
-  }
-}
+struct Placed {
+  std::vector<int> faces;
+  Eigen::Vector2d centre = Eigen::Vector2d::Zero();  // of its flattened corners
+  std::vector<Pose> poses;
+  double area = 0.0;  // flattened area, m^2
+  double longest = 0.0;
+};
 
 // A chart at a density and turn, as the packer sees it: per column of `block` texels, the
 // lowest and highest texel row it occupies (its gutter included), relative to its origin.
@@ -50,26 +46,23 @@ struct Profile {
 };
 
 constexpr double kEmpty = std::numeric_limits<double>::infinity();
+constexpr int kPackingOrders = 200;  // orders the rectangle packer tries per density
 
-Profile MakeProfile(const Placed& chart, double density, int quarter, int block, double margin) {
-  const Eigen::Vector2d turned_size =
-      quarter % 2 == 0 ? chart.size : Eigen::Vector2d(chart.size.y(), chart.size.x());
-  const double width = turned_size.x() * density + 2 * margin;
+Profile MakeProfile(const Pose& pose, double density, int block, double margin) {
+  const double width = pose.size.x() * density + 2 * margin;
   const int columns = std::max(1, static_cast<int>(std::ceil(width / block)));
   Profile profile;
   profile.bottom.assign(columns, kEmpty);
   profile.top.assign(columns, -kEmpty);
-  profile.height = turned_size.y() * density + 2 * margin;
+  profile.height = pose.size.y() * density + 2 * margin;
   auto extend = [&](int column, double y) {
     if (column < 0 || column >= columns) return;
     profile.bottom[column] = std::min(profile.bottom[column], y);
     profile.top[column] = std::max(profile.top[column], y);
   };
-  for (const auto& edge : chart.outline) {
-    const Eigen::Vector2d a =
-        Turn(edge[0], chart.size, quarter) * density + Eigen::Vector2d(margin, margin);
-    const Eigen::Vector2d b =
-        Turn(edge[1], chart.size, quarter) * density + Eigen::Vector2d(margin, margin);
+  for (const auto& edge : pose.outline) {
+    const Eigen::Vector2d a = edge[0] * density + Eigen::Vector2d(margin, margin);
+    const Eigen::Vector2d b = edge[1] * density + Eigen::Vector2d(margin, margin);
     // The edge's y extent in each column slab it spans: its ends, and where it crosses the
     // slabs' sides.
     extend(static_cast<int>(a.x() / block), a.y());
@@ -103,12 +96,12 @@ Profile MakeProfile(const Placed& chart, double density, int quarter, int block,
 }
 
 struct Layout {
-  std::vector<Eigen::Vector2d> origin;  // texel position of each chart's turned box
-  std::vector<int> quarter;             // its turn
+  std::vector<Eigen::Vector2d> origin;  // texel position of each chart's posed box
+  std::vector<int> pose;                // its pose
 };
 
 // Places the charts, largest first, each at the column where it comes to rest lowest (its
-// profile dropped onto the atlas's skyline, Tetris-like), trying every allowed turn; false
+// profile dropped onto the atlas's skyline, Tetris-like), trying every pose; false
 // when one does not fit.
 bool TryPack(const std::vector<Placed>& charts, const std::vector<int>& order, double density,
              const PackingOptions& options, Layout* layout) {
@@ -116,18 +109,19 @@ bool TryPack(const std::vector<Placed>& charts, const std::vector<int>& order, d
   const int columns = options.size / block;
   std::vector<double> skyline(columns, 0.0);
   layout->origin.assign(charts.size(), Eigen::Vector2d::Zero());
-  layout->quarter.assign(charts.size(), 0);
+  layout->pose.assign(charts.size(), 0);
   const double margin = 0.5 * options.gutter_texels;
-  const int turns = options.mode == PackingMode::kObb ? 4 : 1;
+  std::vector<Profile> profiles;
   for (const int c : order) {
     double best_score = kEmpty;
     int best_column = 0;
-    int best_quarter = 0;
+    int best_pose = 0;
     double best_y = 0.0;
-    std::array<Profile, 4> profiles;
-    for (int quarter = 0; quarter < turns; ++quarter) {
-      profiles[quarter] = MakeProfile(charts[c], density, quarter, block, margin);
-      const Profile& profile = profiles[quarter];
+    const int poses = static_cast<int>(charts[c].poses.size());
+    profiles.resize(poses);
+    for (int pose = 0; pose < poses; ++pose) {
+      profiles[pose] = MakeProfile(charts[c].poses[pose], density, block, margin);
+      const Profile& profile = profiles[pose];
       const int width = static_cast<int>(profile.bottom.size());
       for (int x = 0; x + width <= columns; ++x) {
         double y = 0.0;
@@ -142,18 +136,94 @@ bool TryPack(const std::vector<Placed>& charts, const std::vector<int>& order, d
         if (score < best_score) {
           best_score = score;
           best_column = x;
-          best_quarter = quarter;
+          best_pose = pose;
           best_y = y;
         }
       }
     }
     if (best_score == kEmpty) return false;
-    const Profile& profile = profiles[best_quarter];
+    const Profile& profile = profiles[best_pose];
     for (std::size_t i = 0; i < profile.top.size(); ++i)
       if (profile.top[i] != -kEmpty) skyline[best_column + i] = best_y + profile.top[i];
     layout->origin[c] =
         Eigen::Vector2d(static_cast<double>(best_column) * block + margin, best_y + margin);
-    layout->quarter[c] = best_quarter;
+    layout->pose[c] = best_pose;
+  }
+  return true;
+}
+
+struct Rect {
+  double x, y, w, h;
+};
+
+// MaxRects (Jylanki 2010): each chart's box (its gutter included) in the free rectangle that
+// leaves the shortest side over (best short side fit), in either of its two orientations.
+bool TryPackRects(const std::vector<Placed>& charts, const std::vector<int>& order, double density,
+                  const PackingOptions& options, Layout* layout) {
+  const double margin = 0.5 * options.gutter_texels;
+  const double size = options.size;
+  layout->origin.assign(charts.size(), Eigen::Vector2d::Zero());
+  layout->pose.assign(charts.size(), 0);
+  std::vector<Rect> free{{0.0, 0.0, size, size}};
+  for (const int c : order) {
+    double best_score = kEmpty;
+    double best_tie = kEmpty;
+    int best_pose = -1;
+    Rect best{};
+    const int poses = std::min<int>(2, static_cast<int>(charts[c].poses.size()));
+    for (int pose = 0; pose < poses; ++pose) {
+      const double w = charts[c].poses[pose].size.x() * density + 2 * margin;
+      const double h = charts[c].poses[pose].size.y() * density + 2 * margin;
+      for (const Rect& r : free) {
+        if (w > r.w || h > r.h) continue;
+        const double dw = r.w - w;
+        const double dh = r.h - h;
+        const double score = std::min(dw, dh);
+        const double tie = std::max(dw, dh);
+        if (score < best_score || (score == best_score && tie < best_tie)) {
+          best_score = score;
+          best_tie = tie;
+          best_pose = pose;
+          best = {r.x, r.y, w, h};
+        }
+      }
+    }
+    if (best_pose < 0) return false;
+    layout->origin[c] = Eigen::Vector2d(best.x + margin, best.y + margin);
+    layout->pose[c] = best_pose;
+    // Split every free rectangle the box overlaps into its maximal remainders; drop the pieces
+    // inside another rectangle (the untouched ones are inside none already).
+    std::vector<Rect> kept;
+    std::vector<Rect> pieces;
+    kept.reserve(free.size());
+    for (const Rect& r : free) {
+      if (best.x >= r.x + r.w || best.x + best.w <= r.x || best.y >= r.y + r.h ||
+          best.y + best.h <= r.y) {
+        kept.push_back(r);
+        continue;
+      }
+      if (best.x > r.x) pieces.push_back({r.x, r.y, best.x - r.x, r.h});
+      if (best.x + best.w < r.x + r.w)
+        pieces.push_back({best.x + best.w, r.y, r.x + r.w - best.x - best.w, r.h});
+      if (best.y > r.y) pieces.push_back({r.x, r.y, r.w, best.y - r.y});
+      if (best.y + best.h < r.y + r.h)
+        pieces.push_back({r.x, best.y + best.h, r.w, r.y + r.h - best.y - best.h});
+    }
+    auto inside = [](const Rect& a, const Rect& b) {
+      return a.x >= b.x && a.y >= b.y && a.x + a.w <= b.x + b.w && a.y + a.h <= b.y + b.h;
+    };
+    free.clear();
+    for (std::size_t i = 0; i < pieces.size(); ++i) {
+      bool covered = std::any_of(kept.begin(), kept.end(),
+                                 [&](const Rect& k) { return inside(pieces[i], k); });
+      // Of two equal pieces, the first is kept.
+      for (std::size_t j = 0; j < pieces.size() && !covered; ++j)
+        covered =
+            j != i && inside(pieces[i], pieces[j]) && (j < i || !inside(pieces[j], pieces[i]));
+      if (!covered) free.push_back(pieces[i]);
+    }
+    // An untouched rectangle is inside no piece: it was inside no rectangle a piece came from.
+    free.insert(free.end(), kept.begin(), kept.end());
   }
   return true;
 }
@@ -194,66 +264,102 @@ PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
                       "packing: chart id " << c << " outside 0.." << charts - 1);
     placed[c].faces.push_back(static_cast<int>(f));
   }
-  // Each chart into its box: rotated (OBB) and moved to the origin.
+  // Each chart's outline and poses: in OBB mode its minimum-area box in four quarter turns, in
+  // AABB mode as it is.
   for (Placed& chart : placed) {
     if (chart.faces.empty()) continue;
+    for (const int f : chart.faces)
+      for (const auto& p : uv[f]) chart.centre += p;
+    chart.centre /= 3.0 * static_cast<double>(chart.faces.size());
     std::vector<cv::Point2f> points;
-    Eigen::Vector2d centre = Eigen::Vector2d::Zero();
-    for (const int f : chart.faces)
-      for (const auto& p : uv[f]) centre += p;
-    centre /= 3.0 * static_cast<double>(chart.faces.size());
-    for (const int f : chart.faces)
-      for (const auto& p : uv[f])
-        points.emplace_back(static_cast<float>(p.x() - centre.x()),
-                            static_cast<float>(p.y() - centre.y()));
-    Eigen::Matrix2d turn = Eigen::Matrix2d::Identity();
-    if (options.mode == PackingMode::kObb) {
-      const cv::RotatedRect box = cv::minAreaRect(points);
-      turn = Eigen::Rotation2Dd(-box.angle * std::numbers::pi / 180.0).toRotationMatrix();
-    }
-    Eigen::AlignedBox2d bounds;
-    for (const int f : chart.faces)
-      for (auto& p : result.uv[f]) {
-        p = turn * (p - centre);
-        bounds.extend(p);
-      }
     for (const int f : chart.faces) {
-      for (auto& p : result.uv[f]) p -= bounds.min();
-      const auto& t = result.uv[f];
+      for (const auto& p : uv[f])
+        points.emplace_back(static_cast<float>(p.x() - chart.centre.x()),
+                            static_cast<float>(p.y() - chart.centre.y()));
+      const auto& t = uv[f];
       chart.area +=
           0.5 * ((t[1] - t[0]).x() * (t[2] - t[0]).y() - (t[1] - t[0]).y() * (t[2] - t[0]).x());
     }
-    chart.size = bounds.sizes();
     // Boundary edges: those of one face only (a chart's shared corners have equal UVs).
     std::map<std::array<double, 4>, int> edges;
     for (const int f : chart.faces)
       for (int k = 0; k < 3; ++k) {
-        const Eigen::Vector2d& a = result.uv[f][k];
-        const Eigen::Vector2d& b = result.uv[f][(k + 1) % 3];
+        const Eigen::Vector2d a = uv[f][k] - chart.centre;
+        const Eigen::Vector2d b = uv[f][(k + 1) % 3] - chart.centre;
         const bool forward = std::tie(a.x(), a.y()) < std::tie(b.x(), b.y());
         const Eigen::Vector2d& lo = forward ? a : b;
         const Eigen::Vector2d& hi = forward ? b : a;
         ++edges[{lo.x(), lo.y(), hi.x(), hi.y()}];
       }
+    std::vector<std::array<Eigen::Vector2d, 2>> outline;
     for (const auto& [key, count] : edges)
       if (count == 1)
-        chart.outline.push_back({Eigen::Vector2d(key[0], key[1]), Eigen::Vector2d(key[2], key[3])});
+        outline.push_back({Eigen::Vector2d(key[0], key[1]), Eigen::Vector2d(key[2], key[3])});
+    // Turns (radians, the chart turned by -angle): its box's, in four quarter turns.
+    std::vector<double> angles = {0.0};
+    if (options.mode == PackingMode::kObb) {
+      const double box = cv::minAreaRect(points).angle * std::numbers::pi / 180.0;
+      angles = {box, box + 0.5 * std::numbers::pi, box + std::numbers::pi,
+                box + 1.5 * std::numbers::pi};
+    }
+    for (const double angle : angles) {
+      Pose pose;
+      pose.rotation = Eigen::Rotation2Dd(-angle).toRotationMatrix();
+      Eigen::AlignedBox2d bounds;
+      for (const auto& edge : outline) {
+        bounds.extend(pose.rotation * edge[0]);
+        bounds.extend(pose.rotation * edge[1]);
+      }
+      pose.lower = bounds.min();
+      pose.size = bounds.sizes();
+      pose.outline.reserve(outline.size());
+      for (const auto& edge : outline)
+        pose.outline.push_back(
+            {pose.rotation * edge[0] - pose.lower, pose.rotation * edge[1] - pose.lower});
+      chart.longest = std::max({chart.longest, pose.size.x(), pose.size.y()});
+      chart.poses.push_back(std::move(pose));
+    }
   }
   // Largest boxes first (by height, then width).
   std::vector<int> order(charts);
   std::iota(order.begin(), order.end(), 0);
   std::erase_if(order, [&](int c) { return placed[c].faces.empty(); });
   std::sort(order.begin(), order.end(), [&](int a, int b) {
-    const double ha = std::max(placed[a].size.x(), placed[a].size.y());
-    const double hb = std::max(placed[b].size.x(), placed[b].size.y());
+    const double ha = placed[a].poses.front().size.maxCoeff();
+    const double hb = placed[b].poses.front().size.maxCoeff();
     return ha != hb ? ha > hb : a < b;
   });
+  // Orders for the rectangle packer: largest first by longest side, by area and by shortest
+  // side, then the first with neighbours swapped at random (a fixed seed: deterministic).
+  std::vector<std::vector<int>> orders{order};
+  auto add_order = [&](auto key) {
+    std::vector<int> sorted = order;
+    std::stable_sort(sorted.begin(), sorted.end(), [&](int a, int b) { return key(a) > key(b); });
+    orders.push_back(std::move(sorted));
+  };
+  add_order([&](int c) { return placed[c].area; });
+  add_order([&](int c) { return placed[c].poses.front().size.minCoeff(); });
+  std::mt19937 random(1);
+  while (static_cast<int>(orders.size()) < kPackingOrders) {
+    std::vector<int> shuffled = order;
+    for (std::size_t k = 0; k + 1 < shuffled.size(); ++k)
+      if (random() % 3 == 0) std::swap(shuffled[k], shuffled[k + 1]);
+    orders.push_back(std::move(shuffled));
+  }
+  // Whether the charts fit at a density: Tetris-like in the first order (charts interlock), or
+  // as boxes in any of the orders.
+  auto fits = [&](double density, Layout* layout) {
+    if (TryPack(placed, order, density, options, layout)) return true;
+    for (const auto& o : orders)
+      if (TryPackRects(placed, o, density, options, layout)) return true;
+    return false;
+  };
   // The largest density that fits: bisection between an area bound and a safe lower bound.
   double total_area = 0.0;
   double longest = 0.0;
   for (const Placed& chart : placed) {
     total_area += chart.area;
-    longest = std::max({longest, chart.size.x(), chart.size.y()});
+    longest = std::max(longest, chart.longest);
   }
   const double usable = options.size - options.gutter_texels;
   double high = std::min(std::sqrt(usable * usable / std::max(total_area, 1e-30)),
@@ -264,7 +370,7 @@ PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
   for (int iteration = 0; iteration < 30; ++iteration) {
     progress.CheckCancelled();
     const double density = iteration == 0 ? high : 0.5 * (low + high);
-    if (TryPack(placed, order, density, options, &layout)) {
+    if (fits(density, &layout)) {
       low = density;
       best = layout;
       if (iteration == 0) break;
@@ -283,9 +389,11 @@ PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
   for (const int c : order) {
     const Placed& chart = placed[c];
     chart_texels += chart.area * low * low;
+    const Pose& pose = chart.poses[best.pose[c]];
     for (const int f : chart.faces)
       for (auto& p : result.uv[f]) {
-        const Eigen::Vector2d texel = best.origin[c] + Turn(p, chart.size, best.quarter[c]) * low;
+        const Eigen::Vector2d texel =
+            best.origin[c] + (pose.rotation * (p - chart.centre) - pose.lower) * low;
         // The packer's rows count from the bottom: v up, orientation kept (a 90-degree turn
         // is a rotation).
         p = texel / options.size;

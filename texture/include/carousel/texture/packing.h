@@ -4,12 +4,17 @@
 // are area-preserving, in metres). In OBB mode each chart is turned into its minimum-area
 // oriented bounding box (rotating calipers over its convex hull, OpenCV's minAreaRect) and may
 // be placed in any of its four quarter turns; in AABB mode it keeps its orientation (the
-// paper's comparison). Placement is Tetris-like: largest charts first, each chart's outline
-// profile (per column of atlas blocks, the lowest and highest row it covers, gutter included)
-// is dropped onto the atlas's skyline at the column and turn where it comes to rest lowest,
-// so charts interlock instead of sitting in boxes. The density is the largest at which every
-// chart fits (bisection). Charts are at least `gutter_texels` apart, so dilating each chart's
-// texels by half the gutter (bilinear filtering, mip levels) never reaches another chart.
+// paper's comparison). The density is the largest at which every chart fits (bisection); at a
+// density the charts fit when either packer places them all:
+// - Tetris-like: largest charts first, each chart's outline profile (per column of atlas
+//   blocks, the lowest and highest row it covers, gutter included) dropped onto the atlas's
+//   skyline at the column and turn where it comes to rest lowest, so charts interlock;
+// - as boxes, MaxRects with best short side fit (Jylanki 2010, "A thousand ways to pack the
+//   bin"), in the sorted orders and up to 200 deterministic perturbations of them (box packing
+//   is sensitive to order, and each try takes well under a millisecond). With rectified charts
+//   (parameterization.h) boxes waste little.
+// Charts are at least `gutter_texels` apart, so dilating each chart's texels by half the gutter
+// (bilinear filtering, mip levels) never reaches another chart.
 #pragma once
 
 #include <array>
