@@ -4,7 +4,8 @@
 // cores; <= 300 charts, L2 stretch <= 1.05 and utilization >= 75 % on the 50k mesh).
 //
 //   atlas_bench [--faces 5000,50000,200000] [--mesh FILE] [--noise N] [--size N] [--seeds N]
-//               [--gutter N] [--max-normal-deviation DEG] [--charts-image PNG]
+//               [--gutter N] [--max-normal-deviation DEG] [--random-seed N]
+//               [--rectify-stretch S] [--charts-image PNG]
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -81,6 +82,10 @@ int main(int argc, char** argv) {
       options.charts.seeds = std::stoi(next());
     } else if (arg == "--max-normal-deviation") {
       options.charts.max_normal_deviation_deg = std::stod(next());
+    } else if (arg == "--random-seed") {
+      options.charts.random_seed = std::stoull(next());
+    } else if (arg == "--rectify-stretch") {
+      options.parameterization.rectify_max_stretch = std::stod(next());
     } else if (arg == "--charts-image") {
       g_charts_image = next();
     } else if (arg == "--gutter") {

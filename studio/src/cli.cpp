@@ -916,6 +916,11 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
   atlas_command
       ->add_option("--gutter", atlas.options.packing.gutter_texels, "texels between charts")
       ->capture_default_str();
+  atlas_command
+      ->add_option("--rectify-stretch", atlas.options.parameterization.rectify_max_stretch,
+                   "charts pulled towards rectangles (tighter packing) while their L2 stretch "
+                   "stays under this; 1 = angle-preserving flattening only")
+      ->capture_default_str();
   atlas_command->add_option("--charts-image", atlas.charts_image, "PNG of the charts");
 
   try {

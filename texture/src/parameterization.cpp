@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <limits>
 #include <mutex>
 #include <numbers>
 #include <unordered_map>
@@ -10,6 +11,8 @@
 #include <Eigen/Geometry>
 #include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
+#include <Eigen/SparseLU>
+#include <opencv2/imgproc.hpp>
 
 #include "carousel/core/error.h"
 #include "carousel/core/logging.h"
@@ -26,7 +29,9 @@ using SparseMatrix = Eigen::SparseMatrix<double>;
 using Triplet = Eigen::Triplet<double>;
 
 constexpr double kPi = std::numbers::pi;
-constexpr double kMinAngle = 0.0175;  // radians (1 degree): slivers are clamped to this
+constexpr double kMinAngle = 0.0175;
+constexpr int kRectifySteps =
+    4;  // rectification steps at most  // radians (1 degree): slivers are clamped to this
 
 // One chart in local indices.
 struct Chart {
@@ -393,6 +398,159 @@ double ChartStretch(const FaceGraph& g, const Chart& chart,
   return area > 0.0 ? std::sqrt(sum / area) : 1.0;
 }
 
+// Scales `uv` so that its area equals the chart's surface area.
+void ScaleToSurfaceArea(const FaceGraph& g, const Chart& chart, std::vector<Eigen::Vector2d>* uv) {
+  double area_2d = 0.0;
+  double area_3d = 0.0;
+  for (std::size_t i = 0; i < chart.faces.size(); ++i) {
+    const auto& t = chart.corners[i];
+    area_2d += 0.5 * Cross((*uv)[t[1]] - (*uv)[t[0]], (*uv)[t[2]] - (*uv)[t[0]]);
+    area_3d += g.areas[chart.faces[i]];
+  }
+  if (area_2d > 0.0 && area_3d > 0.0) {
+    const double s = std::sqrt(area_3d / area_2d);
+    for (auto& p : *uv) p *= s;
+  }
+}
+
+// The chart's boundary loop (local vertex ids, counter-clockwise), or empty if it is not one
+// simple loop.
+std::vector<int> BoundaryLoop(const FaceGraph& g, const Chart& chart,
+                              const std::vector<int>& chart_of_face) {
+  const int chart_id = chart_of_face[chart.faces.front()];
+  std::unordered_map<int, int> next;
+  for (std::size_t i = 0; i < chart.faces.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      const int across = g.neighbours[chart.faces[i]][k];
+      if (across >= 0 && chart_of_face[across] == chart_id) continue;
+      if (!next.emplace(chart.corners[i][k], chart.corners[i][(k + 1) % 3]).second) return {};
+    }
+  if (next.empty()) return {};
+  std::vector<int> loop;
+  int v = next.begin()->first;
+  do {
+    loop.push_back(v);
+    const auto it = next.find(v);
+    if (it == next.end() || loop.size() > next.size()) return {};
+    v = it->second;
+  } while (v != loop.front());
+  if (loop.size() != next.size()) return {};
+  return loop;
+}
+
+// One rectification step: the boundary is pulled a fraction `amount` of the way onto the
+// chart's minimum-area rectangle (the loop vertices nearest its corners onto them, arc length
+// kept between them) and the interior follows by mean-value harmonic interpolation of the
+// displacement. Returns empty when the boundary cannot be matched to the rectangle (corners
+// out of order) or the solve fails.
+std::vector<Eigen::Vector2d> Rectify(const Chart& chart, const std::vector<int>& loop,
+                                     const std::vector<Eigen::Vector2d>& uv, double amount) {
+  std::vector<cv::Point2f> points;
+  points.reserve(loop.size());
+  for (const int v : loop)
+    points.emplace_back(static_cast<float>(uv[v].x()), static_cast<float>(uv[v].y()));
+  const cv::RotatedRect box = cv::minAreaRect(points);
+  const Eigen::Rotation2Dd turn(box.angle * kPi / 180.0);
+  const Eigen::Vector2d centre(box.center.x, box.center.y);
+  const Eigen::Vector2d half(0.5 * box.size.width, 0.5 * box.size.height);
+  const std::array<Eigen::Vector2d, 4> corners = {
+      Eigen::Vector2d(-half.x(), -half.y()), Eigen::Vector2d(half.x(), -half.y()),
+      Eigen::Vector2d(half.x(), half.y()), Eigen::Vector2d(-half.x(), half.y())};
+  const std::size_t m = loop.size();
+  std::vector<Eigen::Vector2d> q(m);  // the loop in the rectangle's frame
+  for (std::size_t i = 0; i < m; ++i) q[i] = turn.inverse() * (uv[loop[i]] - centre);
+  // Each rectangle corner's nearest loop vertex; they must come in counter-clockwise order.
+  std::array<std::size_t, 4> at{};
+  for (int c = 0; c < 4; ++c) {
+    double best = std::numeric_limits<double>::infinity();
+    for (std::size_t i = 0; i < m; ++i) {
+      const double d = (q[i] - corners[c]).squaredNorm();
+      if (d < best) {
+        best = d;
+        at[c] = i;
+      }
+    }
+  }
+  auto ahead = [&](std::size_t from, std::size_t to) { return (to + m - from) % m; };
+  std::size_t travelled = 0;
+  for (int c = 0; c < 4; ++c) {
+    const std::size_t step = ahead(at[c], at[(c + 1) % 4]);
+    if (step == 0) return {};
+    travelled += step;
+  }
+  if (travelled != m) return {};
+  std::vector<Eigen::Vector2d> target(m);
+  for (int c = 0; c < 4; ++c) {
+    const std::size_t steps = ahead(at[c], at[(c + 1) % 4]);
+    double length = 0.0;
+    for (std::size_t s = 0; s < steps; ++s)
+      length += (q[(at[c] + s + 1) % m] - q[(at[c] + s) % m]).norm();
+    double run = 0.0;
+    for (std::size_t s = 0; s < steps; ++s) {
+      const std::size_t i = (at[c] + s) % m;
+      const double t = length > 0.0 ? run / length : 0.0;
+      target[i] = corners[c] + t * (corners[(c + 1) % 4] - corners[c]);
+      run += (q[(i + 1) % m] - q[i]).norm();
+    }
+  }
+  // Boundary displacements, back in the chart's frame; the interior's by a harmonic solve.
+  const std::size_t n = chart.vertices.size();
+  std::vector<Eigen::Vector2d> shift(n, Eigen::Vector2d::Zero());
+  std::vector<int> unknown(n, -1);
+  int unknowns = 0;
+  for (std::size_t v = 0; v < n; ++v)
+    if (chart.interior[v]) unknown[v] = unknowns++;
+  // An ear's tip (a boundary vertex of one face) is not pulled: on the line through its
+  // neighbours its face would collapse. It moves with them.
+  std::vector<int> faces_at(n, 0);
+  for (const auto& t : chart.corners)
+    for (const int v : t) ++faces_at[v];
+  for (std::size_t i = 0; i < m; ++i) {
+    if (faces_at[loop[i]] < 2) {
+      unknown[loop[i]] = unknowns++;
+      continue;
+    }
+    shift[loop[i]] = turn * (amount * (target[i] - q[i]));
+    unknown[loop[i]] = -1;
+  }
+  std::vector<Eigen::Vector2d> out = uv;
+  if (unknowns > 0) {
+    std::vector<Triplet> triplets;
+    Eigen::MatrixX2d rhs = Eigen::MatrixX2d::Zero(unknowns, 2);
+    for (const auto& t : chart.corners)
+      for (int k = 0; k < 3; ++k) {
+        // Mean value weights (Floater 2003), positive and exact for affine fields: the
+        // corner at a, angle theta, gives edges (a, b) and (a, c) tan(theta / 2) / length.
+        const int a = t[k];
+        if (unknown[a] < 0) continue;
+        const int b = t[(k + 1) % 3];
+        const int c = t[(k + 2) % 3];
+        const Eigen::Vector2d u = uv[b] - uv[a];
+        const Eigen::Vector2d w = uv[c] - uv[a];
+        const double theta = std::atan2(std::abs(Cross(u, w)), u.dot(w));
+        const double half_tan = std::tan(0.5 * theta);
+        for (const auto& [j, length] : {std::pair{b, u.norm()}, std::pair{c, w.norm()}}) {
+          const double weight = half_tan / std::max(length, 1e-300);
+          triplets.emplace_back(unknown[a], unknown[a], weight);
+          if (unknown[j] >= 0)
+            triplets.emplace_back(unknown[a], unknown[j], -weight);
+          else
+            rhs.row(unknown[a]) += weight * shift[j].transpose();
+        }
+      }
+    SparseMatrix laplacian(unknowns, unknowns);
+    laplacian.setFromTriplets(triplets.begin(), triplets.end());
+    Eigen::SparseLU<SparseMatrix> solver(laplacian);
+    if (solver.info() != Eigen::Success) return {};
+    const Eigen::MatrixX2d solved = solver.solve(rhs);
+    if (solver.info() != Eigen::Success || !solved.allFinite()) return {};
+    for (std::size_t v = 0; v < n; ++v)
+      if (unknown[v] >= 0) shift[v] = solved.row(unknown[v]).transpose();
+  }
+  for (std::size_t v = 0; v < n; ++v) out[v] += shift[v];
+  return out;
+}
+
 struct Flattened {
   bool valid = false;
   bool abf_converged = true;
@@ -428,6 +586,26 @@ Flattened Flatten(const FaceGraph& g, const Chart& chart, const std::vector<int>
   out.valid =
       IsValid(g, chart, chart_of_face, out.uv) &&
       (chart.faces.size() == 1 || ChartStretch(g, chart, out.uv) <= options.max_chart_stretch);
+  if (out.valid && options.rectify_max_stretch > 1.0 && chart.faces.size() > 1) {
+    // Rectification in steps of half the remaining way, each from the last one's result,
+    // while the chart stays valid and within the bound (a step that fails is halved).
+    const std::vector<int> loop = BoundaryLoop(g, chart, chart_of_face);
+    const double bound = std::max(options.rectify_max_stretch, ChartStretch(g, chart, out.uv));
+    for (int step = 0; step < kRectifySteps && !loop.empty(); ++step) {
+      bool taken = false;
+      for (double amount = 0.5; amount > 0.1 && !taken; amount *= 0.5) {
+        std::vector<Eigen::Vector2d> rectified = Rectify(chart, loop, out.uv, amount);
+        if (rectified.empty()) break;
+        ScaleToSurfaceArea(g, chart, &rectified);
+        if (!IsValid(g, chart, chart_of_face, rectified) ||
+            ChartStretch(g, chart, rectified) > bound)
+          continue;
+        out.uv = std::move(rectified);
+        taken = true;
+      }
+      if (!taken) break;
+    }
+  }
   return out;
 }
 
@@ -442,6 +620,8 @@ void ParameterizationOptions::Validate() const {
   check(abf_tolerance > 0.0 && std::isfinite(abf_tolerance), "abf_tolerance", "> 0");
   check(max_split_depth >= 0 && max_split_depth <= 64, "max_split_depth", "in [0, 64]");
   check(max_chart_stretch >= 1.0 && std::isfinite(max_chart_stretch), "max_chart_stretch", ">= 1");
+  check(rectify_max_stretch >= 1.0 && std::isfinite(rectify_max_stretch), "rectify_max_stretch",
+        ">= 1");
   check(threads >= 0, "threads", ">= 0");
 }
 
