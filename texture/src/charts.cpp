@@ -140,8 +140,9 @@ std::vector<Eigen::Vector3d> SmoothedNormals(const FaceGraph& g) {
 // its ends (the corners where a third chart or the mesh's boundary meets them), through the
 // two charts' interior. Growth leaves boundaries that wander with the noise; straight ones
 // flatten into charts with straight sides, which pack far tighter. A pair is re-cut only when
-// it shares one arc, both charts stay disks and every face that changes chart lies within
-// the normal bound of its new chart. Faces with chart < 0 are left alone.
+// it shares one arc, both charts stay disks and the faces that change chart lie, on average
+// (area-weighted mean normal), within the normal bound of their new chart. Faces with
+// chart < 0 are left alone.
 class BoundaryRecutter {
  public:
   BoundaryRecutter(const FaceGraph& g, std::vector<Eigen::Vector3d> normals,
@@ -182,7 +183,9 @@ class BoundaryRecutter {
 
  private:
   bool Recut(int a, int b) {
-    // The shared edges must form one open arc u .. v of at least two edges.
+    // The shared edges must form one open arc u .. v of at least two edges (two ends, no
+    // branch, one edge fewer than vertices; a closed loop besides the arc would need one
+    // chart to enclose the other, which disks sharing an arc cannot).
     const int arc_mark = ++vertex_mark_;
     std::vector<int> touched;
     int edges = 0;

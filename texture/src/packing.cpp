@@ -305,11 +305,10 @@ PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
     for (const double angle : angles) {
       Pose pose;
       pose.rotation = Eigen::Rotation2Dd(-angle).toRotationMatrix();
+      // Over every corner, not only the outline's: a folded chart from a caller stays inside.
       Eigen::AlignedBox2d bounds;
-      for (const auto& edge : outline) {
-        bounds.extend(pose.rotation * edge[0]);
-        bounds.extend(pose.rotation * edge[1]);
-      }
+      for (const int f : chart.faces)
+        for (const auto& p : uv[f]) bounds.extend(pose.rotation * (p - chart.centre));
       pose.lower = bounds.min();
       pose.size = bounds.sizes();
       pose.outline.reserve(outline.size());

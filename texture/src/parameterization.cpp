@@ -29,9 +29,8 @@ using SparseMatrix = Eigen::SparseMatrix<double>;
 using Triplet = Eigen::Triplet<double>;
 
 constexpr double kPi = std::numbers::pi;
-constexpr double kMinAngle = 0.0175;
-constexpr int kRectifySteps =
-    4;  // rectification steps at most  // radians (1 degree): slivers are clamped to this
+constexpr double kMinAngle = 0.0175;  // radians (1 degree): slivers are clamped to this
+constexpr int kRectifySteps = 4;      // rectification steps at most
 
 // One chart in local indices.
 struct Chart {
@@ -427,7 +426,8 @@ std::vector<int> BoundaryLoop(const FaceGraph& g, const Chart& chart,
     }
   if (next.empty()) return {};
   std::vector<int> loop;
-  int v = next.begin()->first;
+  // From its lowest vertex: the same loop whatever the map's order.
+  int v = std::min_element(next.begin(), next.end())->first;
   do {
     loop.push_back(v);
     const auto it = next.find(v);
@@ -438,13 +438,13 @@ std::vector<int> BoundaryLoop(const FaceGraph& g, const Chart& chart,
   return loop;
 }
 
-// One rectification step: the boundary is pulled a fraction `amount` of the way onto the
-// chart's minimum-area rectangle (the loop vertices nearest its corners onto them, arc length
-// kept between them) and the interior follows by mean-value harmonic interpolation of the
-// displacement. Returns empty when the boundary cannot be matched to the rectangle (corners
+// The displacement of every vertex that takes the chart onto its minimum-area rectangle: the
+// boundary's (the loop vertices nearest the rectangle's corners onto them, arc length kept
+// between them; ear tips excepted), the interior's and the ear tips' by mean-value harmonic
+// interpolation. Returns empty when the boundary cannot be matched to the rectangle (corners
 // out of order) or the solve fails.
-std::vector<Eigen::Vector2d> Rectify(const Chart& chart, const std::vector<int>& loop,
-                                     const std::vector<Eigen::Vector2d>& uv, double amount) {
+std::vector<Eigen::Vector2d> RectifyingShift(const Chart& chart, const std::vector<int>& loop,
+                                             const std::vector<Eigen::Vector2d>& uv) {
   std::vector<cv::Point2f> points;
   points.reserve(loop.size());
   for (const int v : loop)
@@ -510,10 +510,9 @@ std::vector<Eigen::Vector2d> Rectify(const Chart& chart, const std::vector<int>&
       unknown[loop[i]] = unknowns++;
       continue;
     }
-    shift[loop[i]] = turn * (amount * (target[i] - q[i]));
+    shift[loop[i]] = turn * (target[i] - q[i]);
     unknown[loop[i]] = -1;
   }
-  std::vector<Eigen::Vector2d> out = uv;
   if (unknowns > 0) {
     std::vector<Triplet> triplets;
     Eigen::MatrixX2d rhs = Eigen::MatrixX2d::Zero(unknowns, 2);
@@ -547,8 +546,7 @@ std::vector<Eigen::Vector2d> Rectify(const Chart& chart, const std::vector<int>&
     for (std::size_t v = 0; v < n; ++v)
       if (unknown[v] >= 0) shift[v] = solved.row(unknown[v]).transpose();
   }
-  for (std::size_t v = 0; v < n; ++v) out[v] += shift[v];
-  return out;
+  return shift;
 }
 
 struct Flattened {
@@ -588,14 +586,16 @@ Flattened Flatten(const FaceGraph& g, const Chart& chart, const std::vector<int>
       (chart.faces.size() == 1 || ChartStretch(g, chart, out.uv) <= options.max_chart_stretch);
   if (out.valid && options.rectify_max_stretch > 1.0 && chart.faces.size() > 1) {
     // Rectification in steps of half the remaining way, each from the last one's result,
-    // while the chart stays valid and within the bound (a step that fails is halved).
+    // while the chart stays valid and within the bound (a step that fails is halved, twice at
+    // most). The displacement is linear in the step: solved once per step.
     const std::vector<int> loop = BoundaryLoop(g, chart, chart_of_face);
     const double bound = std::max(options.rectify_max_stretch, ChartStretch(g, chart, out.uv));
     for (int step = 0; step < kRectifySteps && !loop.empty(); ++step) {
       bool taken = false;
-      for (double amount = 0.5; amount > 0.1 && !taken; amount *= 0.5) {
-        std::vector<Eigen::Vector2d> rectified = Rectify(chart, loop, out.uv, amount);
-        if (rectified.empty()) break;
+      const std::vector<Eigen::Vector2d> shift = RectifyingShift(chart, loop, out.uv);
+      for (double amount = 0.5; amount > 0.1 && !shift.empty() && !taken; amount *= 0.5) {
+        std::vector<Eigen::Vector2d> rectified = out.uv;
+        for (std::size_t v = 0; v < rectified.size(); ++v) rectified[v] += amount * shift[v];
         ScaleToSurfaceArea(g, chart, &rectified);
         if (!IsValid(g, chart, chart_of_face, rectified) ||
             ChartStretch(g, chart, rectified) > bound)

@@ -10,8 +10,9 @@
 //   blocks, the lowest and highest row it covers, gutter included) dropped onto the atlas's
 //   skyline at the column and turn where it comes to rest lowest, so charts interlock;
 // - as boxes, MaxRects with best short side fit (Jylanki 2010, "A thousand ways to pack the
-//   bin"), in the sorted orders and up to 200 deterministic perturbations of them (box packing
-//   is sensitive to order, and each try takes well under a millisecond). With rectified charts
+//   bin"), in 200 orders: three sorted (longest side, area, shortest side) and deterministic
+//   perturbations of the first (box packing is sensitive to order; a try takes a fraction of
+//   a millisecond for tens of charts, a few for hundreds). With rectified charts
 //   (parameterization.h) boxes waste little.
 // Charts are at least `gutter_texels` apart, so dilating each chart's texels by half the gutter
 // (bilinear filtering, mip levels) never reaches another chart.

@@ -23,12 +23,14 @@
 // Rectification (our extension, in the spirit of Liu et al. 2019, "Atlas refinement with
 // bounded packing efficiency"): an angle-preserving chart is round and fills about three
 // quarters of its box; rectangles pack with little waste. Each valid chart's boundary is
-// pulled half-way onto its minimum-area rectangle (its four nearest vertices onto the corners,
-// arc length kept between them; ear tips follow their neighbours), the interior following by
+// pulled towards its minimum-area rectangle (its four nearest vertices onto the corners, arc
+// length kept between them; ear tips follow their neighbours), the interior following by
 // mean-value harmonic interpolation (Floater 2003: positive weights, exact for affine maps, so
-// slivers stay unflipped), in up to four steps while the chart stays valid and its L2 stretch
-// stays under rectify_max_stretch. It trades a little stretch and shear for texels: on a 50k
-// marching-cubes blob, utilization 64 % -> 79 % for L2 1.002 -> 1.037.
+// slivers stay unflipped), in up to four steps of half the remaining way (a step that fails
+// is halved), while the chart stays valid and its L2 stretch stays under rectify_max_stretch
+// (or under its own unrectified stretch, if that is higher). It trades a little stretch and
+// shear for texels: on a 50k marching-cubes blob, utilization 69 % -> 79 % for L2 1.002 ->
+// 1.037 and angle distortion 0.6 -> 7 degrees.
 #pragma once
 
 #include <array>
