@@ -35,7 +35,6 @@ struct Placed {
   Eigen::Vector2d centre = Eigen::Vector2d::Zero();  // of its flattened corners
   std::vector<Pose> poses;
   double area = 0.0;  // flattened area, m^2
-  double longest = 0.0;
 };
 
 // A chart at a density and turn, as the packer sees it: per column of `block` texels, the
@@ -315,7 +314,6 @@ PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
       for (const auto& edge : outline)
         pose.outline.push_back(
             {pose.rotation * edge[0] - pose.lower, pose.rotation * edge[1] - pose.lower});
-      chart.longest = std::max({chart.longest, pose.size.x(), pose.size.y()});
       chart.poses.push_back(std::move(pose));
     }
   }
@@ -358,7 +356,7 @@ PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
   double longest = 0.0;
   for (const Placed& chart : placed) {
     total_area += chart.area;
-    longest = std::max(longest, chart.longest);
+    for (const Pose& pose : chart.poses) longest = std::max(longest, pose.size.maxCoeff());
   }
   const double usable = options.size - options.gutter_texels;
   double high = std::min(std::sqrt(usable * usable / std::max(total_area, 1e-30)),

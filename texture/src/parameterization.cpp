@@ -569,18 +569,7 @@ Flattened Flatten(const FaceGraph& g, const Chart& chart, const std::vector<int>
   }
   out.uv = Reconstruct(g, chart, alpha);
   if (out.uv.empty()) return out;
-  // Scale to the surface area.
-  double area_2d = 0.0;
-  double area_3d = 0.0;
-  for (std::size_t i = 0; i < chart.faces.size(); ++i) {
-    const auto& t = chart.corners[i];
-    area_2d += 0.5 * Cross(out.uv[t[1]] - out.uv[t[0]], out.uv[t[2]] - out.uv[t[0]]);
-    area_3d += g.areas[chart.faces[i]];
-  }
-  if (area_2d > 0.0 && area_3d > 0.0) {
-    const double s = std::sqrt(area_3d / area_2d);
-    for (auto& p : out.uv) p *= s;
-  }
+  ScaleToSurfaceArea(g, chart, &out.uv);
   out.valid =
       IsValid(g, chart, chart_of_face, out.uv) &&
       (chart.faces.size() == 1 || ChartStretch(g, chart, out.uv) <= options.max_chart_stretch);
