@@ -9,10 +9,12 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <sstream>
+#include <iostream>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "bench_flags.h"
 #include "carousel/core/image_io.h"
 #include "carousel/core/mesh_io.h"
 #include "carousel/core/mesh_primitives.h"
@@ -59,42 +61,20 @@ int main(int argc, char** argv) {
   std::string mesh_file;
   double noise = 0.3;
   texture::AtlasOptions options;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "%s needs a value\n", arg.c_str());
-        std::exit(64);
-      }
-      return argv[++i];
-    };
-    if (arg == "--faces") {
-      faces.clear();
-      std::stringstream list(next());
-      for (std::string item; std::getline(list, item, ',');) faces.push_back(std::stoi(item));
-    } else if (arg == "--mesh") {
-      mesh_file = next();
-    } else if (arg == "--noise") {
-      noise = std::stod(next());
-    } else if (arg == "--size") {
-      options.packing.size = std::stoi(next());
-    } else if (arg == "--seeds") {
-      options.charts.seeds = std::stoi(next());
-    } else if (arg == "--max-normal-deviation") {
-      options.charts.max_normal_deviation_deg = std::stod(next());
-    } else if (arg == "--random-seed") {
-      options.charts.random_seed = std::stoull(next());
-    } else if (arg == "--rectify-stretch") {
-      options.parameterization.rectify_max_stretch = std::stod(next());
-    } else if (arg == "--charts-image") {
-      g_charts_image = next();
-    } else if (arg == "--gutter") {
-      options.packing.gutter_texels = std::stoi(next());
-    } else {
-      std::fprintf(stderr, "unknown argument %s\n", arg.c_str());
-      return 64;
-    }
-  }
+  BenchFlags flags(argc, argv, "atlas_bench: the texture atlas on marching-cubes meshes, timed");
+  flags.List("--faces", &faces, "marching-cubes meshes of about this many faces")
+      .Option("--mesh", &mesh_file, "a mesh file instead")
+      .Option("--noise", &noise, "noise of the marching-cubes blobs")
+      .Option("--size", &options.packing.size, "atlas size, texels")
+      .Option("--seeds", &options.charts.seeds, "initial chart seeds")
+      .Option("--max-normal-deviation", &options.charts.max_normal_deviation_deg,
+              "chart normal spread, degrees")
+      .Option("--random-seed", &options.charts.random_seed, "random seed of the seed choice")
+      .Option("--rectify-stretch", &options.parameterization.rectify_max_stretch,
+              "L2 stretch bound of rectification, 1 = none")
+      .Option("--charts-image", &g_charts_image, "PNG of the last mesh's OBB atlas")
+      .Option("--gutter", &options.packing.gutter_texels, "chart gap, texels");
+  if (const std::optional<int> exit_code = flags.Parse(std::cout, std::cerr)) return *exit_code;
   try {
     if (!mesh_file.empty()) {
       Report(mesh_file, ReadMesh(mesh_file), options);

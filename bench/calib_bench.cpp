@@ -12,13 +12,15 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <iostream>
 #include <numbers>
+#include <optional>
 #include <string>
 #include <vector>
 
-#include <CLI/CLI.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "bench_flags.h"
 #include "carousel/calib/rig_calibration.h"
 #include "carousel/core/parallel.h"
 #include "carousel/core/progress.h"
@@ -155,15 +157,17 @@ int main(int argc, char** argv) {
   double distance = 1.0;
   bool pipeline = false;
   std::filesystem::path work = std::filesystem::temp_directory_path() / "carousel_calib_bench";
-  CLI::App app{"calib_bench: the rig calibration on the simulated rig, scored against the truth"};
-  app.add_option("--width", width)->capture_default_str();
-  app.add_option("--height", height)->capture_default_str();
-  app.add_option("--stops", stops, "stops per board placement")->capture_default_str();
-  app.add_option("--distance", distance, "camera distance, metres")->capture_default_str();
-  app.add_flag("--pipeline", pipeline,
-               "also texture a product session with the estimated calibration and compare");
-  app.add_option("--work", work, "folder for the pipeline's sessions")->capture_default_str();
-  CLI11_PARSE(app, argc, argv);
+  BenchFlags flags(
+      argc, argv,
+      "calib_bench: the rig calibration on the simulated rig, scored against the truth");
+  flags.Option("--width", &width)
+      .Option("--height", &height)
+      .Option("--stops", &stops, "stops per board placement")
+      .Option("--distance", &distance, "camera distance, metres")
+      .Flag("--pipeline", &pipeline,
+            "also texture a product session with the estimated calibration and compare")
+      .Option("--work", &work, "folder for the pipeline's sessions");
+  if (const std::optional<int> exit_code = flags.Parse(std::cout, std::cerr)) return *exit_code;
   try {
     Accuracy(width, height, stops, distance);
     if (pipeline) Pipeline(width, height, work);

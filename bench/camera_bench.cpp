@@ -13,11 +13,12 @@
 #include <cstdlib>
 #include <filesystem>
 #include <future>
+#include <iostream>
+#include <optional>
 #include <string>
 #include <vector>
 
-#include <CLI/CLI.hpp>
-
+#include "bench_flags.h"
 #include "carousel/core/error.h"
 #include "carousel/rig/gphoto_camera.h"
 #include "carousel/sim/ptpip_camera.h"
@@ -46,14 +47,14 @@ struct Stats {
 int Run(int argc, char** argv) {
   int cameras = 3, shots = 10, width = 5184, height = 3456;
   double random_mb = 0;
-  CLI::App app{"camera_bench: parallel capture and download through libgphoto2, timed"};
-  app.add_option("--cameras", cameras)->capture_default_str();
-  app.add_option("--shots", shots, "shots per camera")->capture_default_str();
-  app.add_option("--width", width)->capture_default_str();
-  app.add_option("--height", height)->capture_default_str();
-  app.add_option("--random-mb", random_mb, "serve random bytes of this size instead")
-      ->capture_default_str();
-  CLI11_PARSE(app, argc, argv);
+  BenchFlags flags(argc, argv,
+                   "camera_bench: parallel capture and download through libgphoto2, timed");
+  flags.Option("--cameras", &cameras)
+      .Option("--shots", &shots, "shots per camera")
+      .Option("--width", &width)
+      .Option("--height", &height)
+      .Option("--random-mb", &random_mb, "serve random bytes of this size instead");
+  if (const std::optional<int> exit_code = flags.Parse(std::cout, std::cerr)) return *exit_code;
 
   // libgphoto2 keeps ~/.gphoto/settings: a scratch HOME keeps the user's untouched.
   const std::filesystem::path work =

@@ -11,13 +11,15 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
-#include <cstring>
 #include <filesystem>
+#include <iostream>
+#include <optional>
 #include <string>
 #include <utility>
 
 #include <opencv2/imgproc.hpp>
 
+#include "bench_flags.h"
 #include "carousel/core/image_io.h"
 #include "carousel/core/mesh_io.h"
 #include "carousel/core/mesh_query.h"
@@ -59,48 +61,24 @@ int main(int argc, char** argv) {
   int max_resolution = recon::VisualHullOptions().max_resolution;
   double voxel_px = recon::VisualHullOptions().voxel_px, size_m = 0.25, noise = 1.5;
   bool truth_masks = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto next = [&] {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "%s needs a value\n", arg.c_str());
-        std::exit(64);
-      }
-      return std::string(argv[++i]);
-    };
-    if (arg == "--scene")
-      scene_name = next();
-    else if (arg == "--width")
-      width = std::stoi(next());
-    else if (arg == "--height")
-      height = std::stoi(next());
-    else if (arg == "--stops")
-      stops = std::stoi(next());
-    else if (arg == "--voxel-px")
-      voxel_px = std::stod(next());
-    else if (arg == "--resolution")
-      resolution = std::stoi(next());
-    else if (arg == "--max-resolution")
-      max_resolution = std::stoi(next());
-    else if (arg == "--faces")
-      faces = std::stoi(next());
-    else if (arg == "--method")
-      method = next();
-    else if (arg == "--size-m")
-      size_m = std::stod(next());
-    else if (arg == "--noise")
-      noise = std::stod(next());
-    else if (arg == "--jpeg")
-      jpeg = std::stoi(next());
-    else if (arg == "--truth-masks")
-      truth_masks = true;
-    else if (arg == "--save")
-      save = next();
-    else {
-      std::fprintf(stderr, "unknown argument %s\n", arg.c_str());
-      return 64;
-    }
-  }
+  BenchFlags flags(argc, argv,
+                   "recon_bench: reconstruction on the simulated rig, measured against the truth");
+  flags.Option("--scene", &scene_name, "shoe, bottle, ring, sphere")
+      .Option("--width", &width)
+      .Option("--height", &height)
+      .Option("--stops", &stops, "turntable stops")
+      .Option("--voxel-px", &voxel_px, "automatic voxel size: pixels a voxel spans")
+      .Option("--resolution", &resolution, "voxels along the longest side, 0 = from --voxel-px")
+      .Option("--max-resolution", &max_resolution,
+              "at most this many voxels along the longest side")
+      .Option("--faces", &faces, "faces of the optimized mesh")
+      .Option("--method", &method, "silhouettes: key or difference")
+      .Option("--size-m", &size_m, "longest side of the object, metres")
+      .Option("--noise", &noise, "render noise sigma, grey levels")
+      .Option("--jpeg", &jpeg, "JPEG quality")
+      .Flag("--truth-masks", &truth_masks, "carve the hull from the true masks")
+      .Option("--save", &save, "folder for masks and meshes, empty = none");
+  if (const std::optional<int> exit_code = flags.Parse(std::cout, std::cerr)) return *exit_code;
   try {
     const sim::Scene scene = MakeScene(scene_name, size_m);
     sim::SimViewsOptions sim_options;

@@ -7,11 +7,12 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <iostream>
 #include <map>
+#include <optional>
 #include <string>
 
-#include <CLI/CLI.hpp>
-
+#include "bench_flags.h"
 #include "carousel/core/progress.h"
 #include "carousel/studio/run_session.h"
 
@@ -30,14 +31,14 @@ int Run(int argc, char** argv) {
   options.sim.stops = 16;
   options.force = true;
   std::filesystem::path work = std::filesystem::temp_directory_path() / "carousel_session_bench";
-  CLI::App app{"session_bench: the one-button session on the simulated rig, timed"};
-  app.add_option("--scene", options.sim.scene)->capture_default_str();
-  app.add_option("--width", options.sim.rig.width)->capture_default_str();
-  app.add_option("--height", options.sim.rig.height)->capture_default_str();
-  app.add_option("--views", options.sim.stops, "turntable stops")->capture_default_str();
-  app.add_option("--data", options.sim.data_dir, "shared test data folder");
-  app.add_option("--work", work, "scratch folder (removed first)")->capture_default_str();
-  CLI11_PARSE(app, argc, argv);
+  BenchFlags flags(argc, argv, "session_bench: the one-button session on the simulated rig, timed");
+  flags.Option("--scene", &options.sim.scene)
+      .Option("--width", &options.sim.rig.width)
+      .Option("--height", &options.sim.rig.height)
+      .Option("--views", &options.sim.stops, "turntable stops")
+      .Option("--data", &options.sim.data_dir, "shared test data folder")
+      .Option("--work", &work, "scratch folder (removed first)");
+  if (const std::optional<int> exit_code = flags.Parse(std::cout, std::cerr)) return *exit_code;
   std::filesystem::remove_all(work);
   options.out = work;
 

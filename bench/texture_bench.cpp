@@ -11,11 +11,12 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <iostream>
+#include <optional>
 #include <string>
 #include <vector>
 
-#include <CLI/CLI.hpp>
-
+#include "bench_flags.h"
 #include "carousel/core/progress.h"
 #include "carousel/core/timer.h"
 #include "carousel/studio/reconstruct.h"
@@ -32,21 +33,18 @@ int Run(int argc, char** argv) {
   std::vector<int> sizes = {8192, 0}, exclude;
   std::filesystem::path work = std::filesystem::temp_directory_path() / "carousel_texture_bench";
   bool no_blend = false, no_correction = false, no_gain = false;
-  CLI::App app{"texture_bench: the texture stage of a simulated session, timed"};
-  app.add_option("--scene", scene, "shoe, bottle, avocado, duck")->capture_default_str();
-  app.add_option("--width", width)->capture_default_str();
-  app.add_option("--height", height)->capture_default_str();
-  app.add_option("--stops", stops)->capture_default_str();
-  app.add_option("--sizes", sizes, "texture sizes, 0 = automatic")
-      ->delimiter(',')
-      ->capture_default_str();
-  app.add_option("--exclude", exclude, "held-out views")->delimiter(',');
-  app.add_option("--work", work, "folder for the session (kept between runs)")
-      ->capture_default_str();
-  app.add_flag("--no-blend", no_blend);
-  app.add_flag("--no-correction", no_correction);
-  app.add_flag("--no-gain", no_gain);
-  CLI11_PARSE(app, argc, argv);
+  BenchFlags flags(argc, argv, "texture_bench: the texture stage of a simulated session, timed");
+  flags.Option("--scene", &scene, "shoe, bottle, avocado, duck")
+      .Option("--width", &width)
+      .Option("--height", &height)
+      .Option("--stops", &stops)
+      .List("--sizes", &sizes, "texture sizes, 0 = automatic")
+      .List("--exclude", &exclude, "held-out views")
+      .Option("--work", &work, "folder for the session (kept between runs)")
+      .Flag("--no-blend", &no_blend)
+      .Flag("--no-correction", &no_correction)
+      .Flag("--no-gain", &no_gain);
+  if (const std::optional<int> exit_code = flags.Parse(std::cout, std::cerr)) return *exit_code;
   const bool blend = !no_blend, correction = !no_correction, gain = !no_gain;
   try {
     Progress progress;

@@ -4,6 +4,8 @@
 #
 #   carousel_add_library(NAME
 #       [SOURCES src...]            # none: an INTERFACE (header-only / contract) library
+#       [INCLUDE_DIR dir]           # the public include root (default include/); the private
+#                                   # one is the src/ beside it (rig's api/include, api/src)
 #       [PUBLIC_LINKS targets...] [PRIVATE_LINKS targets...]
 #       [LANGUAGE_C99])             # pure C99 library (firmware-protocol)
 #   carousel_add_executable(NAME SOURCES src... [PRIVATE_LINKS targets...] [OUTPUT_NAME name])
@@ -41,13 +43,19 @@ function(_carousel_apply_defaults target)
 endfunction()
 
 function(carousel_add_library name)
-  cmake_parse_arguments(ARG "LANGUAGE_C99" "" "SOURCES;PUBLIC_LINKS;PRIVATE_LINKS" ${ARGN})
-  set(_include_dir "${CMAKE_CURRENT_SOURCE_DIR}/include")
+  cmake_parse_arguments(ARG "LANGUAGE_C99" "INCLUDE_DIR" "SOURCES;PUBLIC_LINKS;PRIVATE_LINKS"
+    ${ARGN})
+  if(NOT ARG_INCLUDE_DIR)
+    set(ARG_INCLUDE_DIR include)
+  endif()
+  get_filename_component(_include_dir "${ARG_INCLUDE_DIR}" ABSOLUTE
+    BASE_DIR "${CMAKE_CURRENT_SOURCE_DIR}")
+  get_filename_component(_source_dir "${_include_dir}/../src" ABSOLUTE)
   if(ARG_SOURCES)
     add_library(${name} ${ARG_SOURCES})
     target_include_directories(${name}
       PUBLIC $<BUILD_INTERFACE:${_include_dir}>
-      PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/src)
+      PRIVATE ${_source_dir})
     target_link_libraries(${name} PUBLIC ${ARG_PUBLIC_LINKS} PRIVATE ${ARG_PRIVATE_LINKS})
     if(ARG_LANGUAGE_C99)
       set_target_properties(${name} PROPERTIES C_STANDARD 99 C_STANDARD_REQUIRED ON C_EXTENSIONS OFF)

@@ -25,8 +25,23 @@ using internal::ViewsCalibration;
 
 }  // namespace
 
+const OptionTable<IntrinsicsOptions>& IntrinsicsOptions::Fields() {
+  using O = IntrinsicsOptions;
+  static const OptionTable<O> table = [] {
+    OptionTable<O> t;
+    t.Add(&O::fix_aspect_ratio, {.name = "fix-aspect", .help = "fx = fy (square pixels)"});
+    t.Add(&O::fix_k3, {.name = "fix-k3", .help = "k3 = 0 (narrow lenses)"});
+    t.Add(&O::zero_tangential, {.name = "zero-tangential", .help = "p1 = p2 = 0"});
+    t.Add(&O::min_views,
+          {.name = "min-views", .help = "usable photos needed", .min = 1, .advanced = true});
+    return t;
+  }();
+  return table;
+}
+
 void IntrinsicsOptions::Validate() const {
   detect.Validate();
+  Fields().Check(*this);
   CAROUSEL_THROW_IF(min_views < 1, InvalidArgument, "min_views must be >= 1");
   CAROUSEL_THROW_IF(!std::isfinite(outlier_factor) || !(outlier_floor_px >= 0), InvalidArgument,
                     "outlier_factor must be finite and outlier_floor_px >= 0");

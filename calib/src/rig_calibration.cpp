@@ -182,8 +182,37 @@ Rigid3d InitialCamFromTable(const std::vector<const Photo*>& photos,
 
 }  // namespace
 
+const OptionTable<RigCalibrationOptions>& RigCalibrationOptions::Fields() {
+  using O = RigCalibrationOptions;
+  static const OptionTable<O> table = [] {
+    OptionTable<O> t;
+    t.Add(&O::fix_k3, {.name = "fix-k3",
+                       .help = "k3 = 0 (free it for wide lenses with the board near every image "
+                               "corner)",
+                       .negative_name = "free-k3"});
+    t.Add(&O::refine_intrinsics, {.name = "refine-intrinsics",
+                                  .help = "refine the given intrinsics with the rig",
+                                  .negative_name = "keep-intrinsics"});
+    t.Add(&O::max_angle_error_deg,
+          {.name = "max-angle-error",
+           .help = "largest disagreement of a reported table angle with the board",
+           .unit = "deg",
+           .min = 0,
+           .min_exclusive = true});
+    t.Add(&O::max_rms_px, {.name = "max-rms",
+                           .help = "largest final reprojection RMS",
+                           .unit = "px",
+                           .min = 0,
+                           .min_exclusive = true,
+                           .advanced = true});
+    return t;
+  }();
+  return table;
+}
+
 void RigCalibrationOptions::Validate() const {
   detect.Validate();
+  Fields().Check(*this);
   CAROUSEL_THROW_IF(!(board_origin_height_m >= 0) || board_origin_height_m > 1.0, InvalidArgument,
                     "board_origin_height_m must be in [0, 1] m");
   CAROUSEL_THROW_IF(min_views_per_camera < 3, InvalidArgument, "min_views_per_camera must be >= 3");

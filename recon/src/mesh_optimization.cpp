@@ -196,23 +196,73 @@ void CollapseDegenerateEdges(Mesh* mesh) {
 
 }  // namespace
 
+const OptionTable<MeshOptimizationOptions>& MeshOptimizationOptions::Fields() {
+  using O = MeshOptimizationOptions;
+  static const OptionTable<O> table = [] {
+    OptionTable<O> t;
+    t.Add(&O::target_faces,
+          {.name = "faces", .help = "faces of the optimized mesh", .unit = "faces", .min = 100});
+    t.Add(&O::smoothing_iterations, {.name = "smoothing-iterations",
+                                     .help = "Taubin smoothing passes on the hull (0: none)",
+                                     .min = 0,
+                                     .max = 200,
+                                     .advanced = true});
+    t.Add(&O::taubin_lambda, {.name = "taubin-lambda",
+                              .help = "Taubin smoothing's shrinking step",
+                              .min = 0,
+                              .max = 1,
+                              .min_exclusive = true,
+                              .max_exclusive = true,
+                              .advanced = true});
+    t.Add(&O::taubin_mu, {.name = "taubin-mu",
+                          .help = "Taubin smoothing's inflating step (below -lambda)",
+                          .min = -1,
+                          .max = 0,
+                          .min_exclusive = true,
+                          .max_exclusive = true,
+                          .advanced = true});
+    t.Add(&O::remesh, {.name = "remesh", .help = "isotropic remeshing before the final decimation"});
+    t.Add(&O::remesh_iterations, {.name = "remesh-iterations",
+                                  .help = "isotropic remeshing passes",
+                                  .min = 1,
+                                  .max = 20,
+                                  .advanced = true});
+    t.Add(&O::remesh_face_factor, {.name = "remesh-face-factor",
+                                   .help = "remesh to about this many times --faces",
+                                   .min = 1,
+                                   .max = 10,
+                                   .advanced = true});
+    t.Add(&O::max_normal_deviation_deg,
+          {.name = "max-normal-deviation",
+           .help = "largest change of a face normal by one edge collapse",
+           .unit = "deg",
+           .min = 0,
+           .max = 180,
+           .min_exclusive = true,
+           .advanced = true});
+    t.Add(&O::max_aspect_ratio,
+          {.name = "max-aspect-ratio",
+           .help = "largest triangle aspect ratio (longest edge / height) a collapse may create",
+           .min = 1,
+           .min_exclusive = true,
+           .advanced = true});
+    t.Add(&O::target_volume_m3, {.name = "target-volume",
+                                 .help = "volume the result is offset to",
+                                 .unit = "m^3",
+                                 .min = 0,
+                                 .special = 0,
+                                 .special_meaning = "the input's",
+                                 .advanced = true});
+    return t;
+  }();
+  return table;
+}
+
 void MeshOptimizationOptions::Validate() const {
-  auto check = [](bool ok, const char* field, const char* rule) {
-    if (!ok)
-      throw InvalidArgument(std::string("MeshOptimizationOptions.") + field + " must be " + rule);
-  };
-  check(target_faces >= 100, "target_faces", ">= 100");
-  check(smoothing_iterations >= 0 && smoothing_iterations <= 200, "smoothing_iterations",
-        "in [0, 200]");
-  check(taubin_lambda > 0.0 && taubin_lambda < 1.0, "taubin_lambda", "in (0, 1)");
-  check(taubin_mu < -taubin_lambda && taubin_mu > -1.0, "taubin_mu", "in (-1, -taubin_lambda)");
-  check(remesh_iterations >= 1 && remesh_iterations <= 20, "remesh_iterations", "in [1, 20]");
-  check(remesh_face_factor >= 1.0 && remesh_face_factor <= 10.0, "remesh_face_factor",
-        "in [1, 10]");
-  check(max_normal_deviation_deg > 0.0 && max_normal_deviation_deg <= 180.0,
-        "max_normal_deviation_deg", "in (0, 180]");
-  check(max_aspect_ratio > 1.0 && std::isfinite(max_aspect_ratio), "max_aspect_ratio", "> 1");
-  check(target_volume_m3 >= 0.0 && std::isfinite(target_volume_m3), "target_volume_m3", ">= 0");
+  Fields().Check(*this);
+  CAROUSEL_THROW_IF(!(taubin_mu < -taubin_lambda), InvalidArgument,
+                    "--taubin-mu must be below -(--taubin-lambda) (" << -taubin_lambda
+                                                                     << "), got " << taubin_mu);
 }
 
 void TaubinSmooth(Mesh* mesh, int iterations, double lambda, double mu) {

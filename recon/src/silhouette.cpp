@@ -252,23 +252,77 @@ const char* SilhouetteMethodName(SilhouetteMethod method) {
   return method == SilhouetteMethod::kKey ? "key" : "difference";
 }
 
+const OptionTable<SilhouetteOptions>& SilhouetteOptions::Fields() {
+  using O = SilhouetteOptions;
+  static const OptionTable<O> table = [] {
+    OptionTable<O> t;
+    t.AddChoice(&O::method,
+                {.name = "method",
+                 .help = "silhouettes by keying against the backdrop, or by differencing against "
+                         "background plates (backgrounds/cam<C>.jpg)"},
+                {{"key", SilhouetteMethod::kKey}, {"difference", SilhouetteMethod::kDifference}});
+    t.Add(&O::noise_threshold, {.name = "noise-threshold",
+                                .help = "colour distance that is always background (noise, JPEG)",
+                                .unit = "8-bit levels",
+                                .min = 0,
+                                .advanced = true});
+    t.Add(&O::chroma_threshold, {.name = "chroma-threshold",
+                                 .help = "largest chromaticity distortion of a background pixel",
+                                 .unit = "8-bit levels",
+                                 .min = 0,
+                                 .min_exclusive = true,
+                                 .advanced = true});
+    t.Add(&O::min_shadow_brightness,
+          {.name = "min-shadow-brightness",
+           .help = "a background pixel may be darkened to this fraction of the backdrop (shadows)",
+           .min = 0,
+           .max = 1,
+           .advanced = true});
+    t.Add(&O::max_highlight_brightness,
+          {.name = "max-highlight-brightness",
+           .help = "... or brightened to this multiple of it (highlights, exposure drift)",
+           .min = 1,
+           .advanced = true});
+    t.Add(&O::plate_radius_m, {.name = "plate-radius-m",
+                               .help = "turntable plate radius to remove from the silhouettes",
+                               .unit = "m",
+                               .min = 0,
+                               .special = 0,
+                               .special_meaning = "none"});
+    t.Add(&O::plate_rim_m, {.name = "plate-rim-m",
+                            .help = "the plate's rim band (thickness, edge) counted as background",
+                            .unit = "m",
+                            .min = 0,
+                            .max = 0.05,
+                            .advanced = true});
+    t.Add(&O::plate_rim_px, {.name = "plate-rim-px",
+                             .help = "the rim band grown by this many pixels (anti-aliasing)",
+                             .unit = "px",
+                             .min = 0,
+                             .max = 50,
+                             .advanced = true});
+    t.Add(&O::refine_boundary,
+          {.name = "refine-boundary", .help = "boundary refinement by local alpha estimation"});
+    t.Add(&O::min_component_fraction,
+          {.name = "min-component-fraction",
+           .help = "object pieces smaller than this fraction of the largest are dropped",
+           .min = 0,
+           .max = 1,
+           .advanced = true});
+    t.Add(&O::max_hole_fraction,
+          {.name = "max-hole-fraction",
+           .help = "background holes smaller than this fraction of the object are filled",
+           .min = 0,
+           .max = 1,
+           .advanced = true});
+    return t;
+  }();
+  return table;
+}
+
 void SilhouetteOptions::Validate() const {
-  auto check = [](bool ok, const char* field, const char* rule) {
-    if (!ok) throw InvalidArgument(std::string("SilhouetteOptions.") + field + " must be " + rule);
-  };
-  check(noise_threshold >= 0.0 && std::isfinite(noise_threshold), "noise_threshold", ">= 0");
-  check(chroma_threshold > 0.0 && std::isfinite(chroma_threshold), "chroma_threshold", "> 0");
-  check(min_shadow_brightness >= 0.0 && min_shadow_brightness <= 1.0, "min_shadow_brightness",
-        "in [0, 1]");
-  check(max_highlight_brightness >= 1.0 && std::isfinite(max_highlight_brightness),
-        "max_highlight_brightness", ">= 1");
-  check(plate_radius_m >= 0.0 && std::isfinite(plate_radius_m), "plate_radius_m", ">= 0");
-  check(plate_rim_px >= 0.0 && plate_rim_px <= 50.0, "plate_rim_px", "in [0, 50]");
-  check(plate_rim_m >= 0.0 && plate_rim_m <= 0.05, "plate_rim_m", "in [0, 0.05]");
-  check(min_component_fraction >= 0.0 && min_component_fraction <= 1.0, "min_component_fraction",
-        "in [0, 1]");
-  check(max_hole_fraction >= 0.0 && max_hole_fraction <= 1.0, "max_hole_fraction", "in [0, 1]");
-  check(threads >= 0, "threads", ">= 0");
+  Fields().Check(*this);
+  CAROUSEL_THROW_IF(threads < 0, InvalidArgument, "SilhouetteOptions.threads must be >= 0");
 }
 
 cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,

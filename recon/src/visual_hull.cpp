@@ -402,21 +402,65 @@ Contour ContourCells(const std::vector<Eigen::Vector3i>& cells, int level, const
 
 }  // namespace
 
+const OptionTable<VisualHullOptions>& VisualHullOptions::Fields() {
+  using O = VisualHullOptions;
+  static const OptionTable<O> table = [] {
+    OptionTable<O> t;
+    t.Add(&O::voxel_size_m, {.name = "voxel-size-m",
+                             .help = "hull voxel edge length",
+                             .unit = "m",
+                             .min = 0,
+                             .min_exclusive = true,
+                             .special = 0,
+                             .special_meaning = "from --resolution or --voxel-px"});
+    t.Add(&O::resolution, {.name = "resolution",
+                           .help = "hull voxels along the object's longest side",
+                           .min = 16,
+                           .max = 4096,
+                           .special = 0,
+                           .special_meaning = "from --voxel-px"});
+    t.Add(&O::voxel_px,
+          {.name = "voxel-px",
+           .help = "hull voxel size in pixels of the sharpest view, when no --resolution ...",
+           .unit = "px",
+           .min = 0,
+           .min_exclusive = true});
+    t.Add(&O::max_resolution,
+          {.name = "max-resolution",
+           .help = "... but at most this many voxels along the object's longest side",
+           .min = 16,
+           .max = 4096});
+    t.Add(&O::use_floor,
+          {.name = "floor", .help = "the object stands on the plate: nothing below the floor"});
+    t.Add(&O::floor_z_m,
+          {.name = "floor-z-m", .help = "height of the floor", .unit = "m", .advanced = true});
+    t.Add(&O::min_view_consistency,
+          {.name = "min-view-consistency",
+           .help = "a view keeping less of the other views' hull than this is inconsistent",
+           .min = 0,
+           .max = 1,
+           .advanced = true});
+    t.Add(&O::max_surface_cells, {.name = "max-surface-cells",
+                                  .help = "largest surface a hull may need (memory guard)",
+                                  .unit = "cells",
+                                  .min = 1000,
+                                  .advanced = true});
+    t.Add(&O::proxy_max_faces,
+          {.name = "proxy-max-faces",
+           .help = "hulls with more faces get a coarser proxy as the mesh optimization's input",
+           .unit = "faces",
+           .min = 10000,
+           .special = 0,
+           .special_meaning = "never",
+           .advanced = true});
+    return t;
+  }();
+  return table;
+}
+
 void VisualHullOptions::Validate() const {
-  auto check = [](bool ok, const char* field, const char* rule) {
-    if (!ok) throw InvalidArgument(std::string("VisualHullOptions.") + field + " must be " + rule);
-  };
-  check(voxel_size_m >= 0.0 && std::isfinite(voxel_size_m), "voxel_size_m", ">= 0");
-  check(resolution == 0 || (resolution >= 16 && resolution <= 4096), "resolution",
-        "0 or in [16, 4096]");
-  check(voxel_px > 0.0 && std::isfinite(voxel_px), "voxel_px", "> 0");
-  check(max_resolution >= 16 && max_resolution <= 4096, "max_resolution", "in [16, 4096]");
-  check(std::isfinite(floor_z_m), "floor_z_m", "finite");
-  check(min_view_consistency >= 0.0 && min_view_consistency <= 1.0, "min_view_consistency",
-        "in [0, 1]");
-  check(max_surface_cells >= 1000, "max_surface_cells", ">= 1000");
-  check(proxy_max_faces == 0 || proxy_max_faces >= 10000, "proxy_max_faces", "0 or >= 10000");
-  check(threads >= 0, "threads", ">= 0");
+  Fields().Check(*this);
+  CAROUSEL_THROW_IF(threads < 0, InvalidArgument, "VisualHullOptions.threads must be >= 0");
 }
 
 VisualHullResult ComputeVisualHull(const std::vector<View>& views, const VisualHullOptions& options,

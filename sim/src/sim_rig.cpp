@@ -9,33 +9,37 @@
 
 #include "carousel/core/error.h"
 #include "carousel/core/file_util.h"
+#include "carousel/rig/camera_settings.h"
 
 namespace carousel::sim {
 namespace {
 
 constexpr double kDegToRad = std::numbers::pi / 180.0;
 
-// Parses "1/125", "0.5", "2" (seconds).
-double ParseShutter(const std::string& value) {
-  const std::size_t slash = value.find('/');
-  std::size_t used = 0;
-  if (slash != std::string::npos) {
-    const double num = std::stod(value.substr(0, slash), &used);
-    const double den = std::stod(value.substr(slash + 1));
-    if (den <= 0) throw std::invalid_argument("zero denominator");
-    return num / den;
+// Whether the simulated camera takes `value` for its setting `name`.
+bool IsValidSetting(const std::string& name, const std::string& value) {
+  try {
+    if (name == rig::kSettingIso) {
+      std::size_t used = 0;
+      const int iso = std::stoi(value, &used);
+      return used == value.size() && iso >= 50 && iso <= 102400;
+    }
+    if (name == rig::kSettingAperture) {
+      const double f = rig::ParseApertureFNumber(value);
+      return f >= 1.0 && f <= 64.0;
+    }
+    if (name == rig::kSettingShutterSpeed) {
+      const double t = rig::ParseShutterSeconds(value);
+      return t > 0 && t <= 30;
+    }
+  } catch (const std::logic_error&) {  // std::stoi
+    return false;
+  } catch (const InvalidArgument&) {  // the label parsers
+    return false;
   }
-  const double seconds = std::stod(value, &used);
-  if (used != value.size()) throw std::invalid_argument("trailing text");
-  return seconds;
-}
-
-double ParseAperture(const std::string& value) {
-  const std::string number = value.rfind("f/", 0) == 0 ? value.substr(2) : value;
-  std::size_t used = 0;
-  const double f = std::stod(number, &used);
-  if (used != number.size()) throw std::invalid_argument("trailing text");
-  return f;
+  if (name == rig::kSettingImageFormat) return value == "jpeg";
+  if (name == rig::kSettingCaptureTarget) return value == "card" || value == "ram";
+  return true;
 }
 
 }  // namespace
@@ -265,34 +269,17 @@ void SimCamera::SetSetting(const std::string& name, const std::string& value,
   auto it = settings_.find(name);
   CAROUSEL_THROW_IF(it == settings_.end(), InvalidArgument,
                     "camera " << options_.serial << ": unknown setting '" << name << "'");
-  try {
-    if (name == rig::kSettingIso) {
-      std::size_t used = 0;
-      const int iso = std::stoi(value, &used);
-      if (used != value.size() || iso < 50 || iso > 102400) throw std::invalid_argument("iso");
-    } else if (name == rig::kSettingAperture) {
-      const double f = ParseAperture(value);
-      if (!(f >= 1.0 && f <= 64.0)) throw std::invalid_argument("aperture");
-    } else if (name == rig::kSettingShutterSpeed) {
-      const double t = ParseShutter(value);
-      if (!(t > 0 && t <= 30)) throw std::invalid_argument("shutter");
-    } else if (name == rig::kSettingImageFormat && value != "jpeg") {
-      throw std::invalid_argument("format");
-    } else if (name == rig::kSettingCaptureTarget && value != "card" && value != "ram") {
-      throw std::invalid_argument("target");
-    }
-  } catch (const std::logic_error&) {
-    throw InvalidArgument("camera " + options_.serial + ": '" + value +
-                          "' is not a valid value for " + name);
-  }
+  CAROUSEL_THROW_IF(
+      !IsValidSetting(name, value), InvalidArgument,
+      "camera " << options_.serial << ": '" << value << "' is not a valid value for " << name);
   it->second = value;
 }
 
 double SimCamera::ExposureGain() const {
   std::lock_guard<std::mutex> lock(mutex_);
   const double iso = std::stod(settings_.at(rig::kSettingIso));
-  const double f = ParseAperture(settings_.at(rig::kSettingAperture));
-  const double t = ParseShutter(settings_.at(rig::kSettingShutterSpeed));
+  const double f = rig::ParseApertureFNumber(settings_.at(rig::kSettingAperture));
+  const double t = rig::ParseShutterSeconds(settings_.at(rig::kSettingShutterSpeed));
   return (iso / 100.0) * (t * 125.0) * (64.0 / (f * f));
 }
 

@@ -1,6 +1,5 @@
 #include "carousel/studio/calibrate_session.h"
 
-#include <fstream>
 #include <numbers>
 
 #include <nlohmann/json.hpp>
@@ -8,6 +7,7 @@
 #include "carousel/calib/intrinsics.h"
 #include "carousel/core/error.h"
 #include "carousel/core/file_util.h"
+#include "carousel/core/json.h"
 #include "carousel/core/logging.h"
 #include "carousel/studio/session.h"
 
@@ -18,10 +18,41 @@ using json = nlohmann::json;
 
 }  // namespace
 
+const OptionTable<CalibrationPlan>& CalibrationPlan::Fields() {
+  using O = CalibrationPlan;
+  static const OptionTable<O> table = [] {
+    OptionTable<O> t;
+    t.Add(&O::board, {.name = "board",
+                      .help = "calibration: the board (chessboard:COLSxROWS:SQUARE_M or "
+                              "charuco:SXxSY:SQUARE_M:MARKER_M:DICT)"});
+    t.Add(&O::placements,
+          {.name = "placements",
+           .help = "calibration: passes of the table, the board placed anew for each",
+           .min = 1,
+           .max = 8});
+    t.Add(&O::sim_leans_deg,
+          {.name = "leans",
+           .help = "calibration, simulated rig: the board's lean back from vertical per pass",
+           .unit = "deg",
+           .min = 0,
+           .max = 80});
+    t.Add(&O::board_origin_height_m,
+          {.name = "board-height",
+           .help = "calibration on hardware: height of the board's origin (first corner) above "
+                   "the plate in the first placement",
+           .unit = "m",
+           .min = 0,
+           .max = 1,
+           .special = -1,
+           .special_meaning = "not known (the simulated rig knows it)"});
+    return t;
+  }();
+  return table;
+}
+
 void CalibrationPlan::Validate() const {
   calib::BoardSpec::Parse(board);
-  CAROUSEL_THROW_IF(placements < 1 || placements > 8, InvalidArgument,
-                    "a calibration takes 1..8 board placements, not " << placements);
+  Fields().Check(*this);
   CAROUSEL_THROW_IF(
       static_cast<int>(sim_leans_deg.size()) < placements, InvalidArgument,
       "the simulated calibration needs a lean for each of its " << placements << " placements");
@@ -39,17 +70,17 @@ json CalibrationPlanToJson(const CalibrationPlan& plan) {
 }
 
 CalibrationPlan CalibrationPlanFromJson(const json& value, const std::filesystem::path& file) {
+  // run.json holds the plan as its "calibration".
+  const JsonReader read(value, file, "calibration");
   CalibrationPlan plan;
+  plan.board = read.String("board");
+  plan.placements = read.Int("placements");
+  plan.sim_leans_deg = read.Numbers("sim_leans_deg");
+  plan.board_origin_height_m = read.Number("board_origin_height_m");
   try {
-    plan.board = value.at("board").get<std::string>();
-    plan.placements = value.at("placements").get<int>();
-    plan.sim_leans_deg = value.at("sim_leans_deg").get<std::vector<double>>();
-    plan.board_origin_height_m = value.at("board_origin_height_m").get<double>();
     plan.Validate();
-  } catch (const json::exception& e) {
-    throw FormatError(file, std::string("malformed calibration plan: ") + e.what());
   } catch (const InvalidArgument& e) {
-    throw FormatError(file, e.what());
+    read.Fail(read.Name() + ": " + e.what());
   }
   return plan;
 }
@@ -58,22 +89,13 @@ std::optional<CalibrationPlan> ReadCalibrationPlan(const std::filesystem::path& 
                                                    int* stops_per_placement) {
   const std::filesystem::path path = session / "run.json";
   if (!std::filesystem::is_regular_file(path)) return std::nullopt;
-  json run;
-  try {
-    std::ifstream in(path);
-    run = json::parse(in);
-  } catch (const json::exception& e) {
-    throw FormatError(path, std::string("not valid JSON: ") + e.what());
-  }
-  if (!run.contains("calibration")) return std::nullopt;
-  CalibrationPlan plan = CalibrationPlanFromJson(run["calibration"], path);
-  try {
-    *stops_per_placement = run.at("backend") == "hardware"
-                               ? run.at("rig").at("capture").at("stops").get<int>()
-                               : run.at("sim").at("stops").get<int>();
-  } catch (const json::exception& e) {
-    throw FormatError(path, std::string("has no stop count: ") + e.what());
-  }
+  const json run = ParseJsonFile(path);
+  const JsonReader read(run, path);
+  if (!read.Has("calibration")) return std::nullopt;
+  CalibrationPlan plan = CalibrationPlanFromJson(run.at("calibration"), path);
+  *stops_per_placement = read.String("backend") == "hardware"
+                             ? read.Object("rig").Object("capture").Int("stops")
+                             : read.Object("sim").Int("stops");
   return plan;
 }
 

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "carousel/core/error.h"
+#include "carousel/core/json.h"
 #include "carousel/core/logging.h"
 #include "carousel/core/timer.h"
 #include "carousel/studio/checksum.h"
@@ -103,9 +104,8 @@ std::string Staleness(const Session& session, const char* stage, const std::stri
   return "";
 }
 
-void RecordInputs(const std::filesystem::path& folder, const char* stage,
+void RecordInputs(const std::filesystem::path& folder, Session& session, const char* stage,
                   const std::string& fingerprint) {
-  Session session = ReadSession(folder);
   session.stage_inputs[stage] = fingerprint;
   WriteSessionManifest(folder, session);
 }
@@ -119,7 +119,11 @@ void ProcessOptions::Validate() const {
 
 std::string ReconstructFingerprint(const std::filesystem::path& folder,
                                    const ReconstructOptions& options) {
-  const Session session = ReadSession(folder);
+  return ReconstructFingerprint(folder, ReadSession(folder), options);
+}
+
+std::string ReconstructFingerprint(const std::filesystem::path& folder, const Session& session,
+                                   const ReconstructOptions& options) {
   std::ostringstream inputs;
   inputs << "frame=" << session.frame << '\n';
   for (const SessionView& view : session.views) {
@@ -142,11 +146,15 @@ std::string TextureFingerprint(const std::filesystem::path& folder,
 
 ProcessResult ProcessSession(const std::filesystem::path& folder, const ProcessOptions& options,
                              Progress& progress) {
+  Session session = ReadSession(folder);
+  return ProcessSession(folder, session, options, progress);
+}
+
+ProcessResult ProcessSession(const std::filesystem::path& folder, Session& session,
+                             const ProcessOptions& options, Progress& progress) {
   options.Validate();
   ProcessResult result;
-  Session session = ReadSession(folder);
-
-  const std::string recon_inputs = ReconstructFingerprint(folder, options.reconstruct);
+  const std::string recon_inputs = ReconstructFingerprint(folder, session, options.reconstruct);
   bool masks_present = true;
   for (const SessionView& view : session.views) {
     masks_present =
@@ -161,10 +169,9 @@ ProcessResult ProcessSession(const std::filesystem::path& folder, const ProcessO
     CAROUSEL_LOG_INFO(folder.string()
                       << ": reconstruct runs (" << result.reconstruct_reason << ")");
     Stopwatch watch;
-    result.reconstruct = ReconstructSession(folder, options.reconstruct, progress);
-    RecordInputs(folder, kReconstruct, recon_inputs);
+    result.reconstruct = ReconstructSession(folder, session, options.reconstruct, progress);
+    RecordInputs(folder, session, kReconstruct, recon_inputs);
     result.seconds_reconstruct = watch.ElapsedSeconds();
-    session = ReadSession(folder);
   } else {
     result.reconstruct_reason = "current";
   }
@@ -180,8 +187,8 @@ ProcessResult ProcessSession(const std::filesystem::path& folder, const ProcessO
   if (!result.texture_reason.empty()) {
     CAROUSEL_LOG_INFO(folder.string() << ": texture runs (" << result.texture_reason << ")");
     Stopwatch watch;
-    result.texture = TextureSession(folder, options.texture, progress);
-    RecordInputs(folder, kTexture, texture_inputs);
+    result.texture = TextureSession(folder, session, options.texture, progress);
+    RecordInputs(folder, session, kTexture, texture_inputs);
     result.seconds_texture = watch.ElapsedSeconds();
   } else {
     result.texture_reason = "current";

@@ -42,6 +42,15 @@ std::vector<cv::Mat> LoadBackgrounds(const std::filesystem::path& folder, const 
 
 }  // namespace
 
+const OptionTable<ReconstructOptions>& ReconstructOptions::Fields() {
+  static const OptionTable<ReconstructOptions> table =
+      OptionTable<ReconstructOptions>()
+          .Include(&ReconstructOptions::silhouettes, recon::SilhouetteOptions::Fields())
+          .Include(&ReconstructOptions::hull, recon::VisualHullOptions::Fields())
+          .Include(&ReconstructOptions::mesh, recon::MeshOptimizationOptions::Fields());
+  return table;
+}
+
 void ReconstructOptions::Validate() const {
   silhouettes.Validate();
   hull.Validate();
@@ -49,9 +58,15 @@ void ReconstructOptions::Validate() const {
 }
 
 ReconstructResult ReconstructSession(const std::filesystem::path& session_folder,
-                                     const ReconstructOptions& requested, Progress& progress) {
-  requested.Validate();
+                                     const ReconstructOptions& options, Progress& progress) {
   Session session = ReadSession(session_folder);
+  return ReconstructSession(session_folder, session, options, progress);
+}
+
+ReconstructResult ReconstructSession(const std::filesystem::path& session_folder,
+                                     Session& session, const ReconstructOptions& requested,
+                                     Progress& progress) {
+  requested.Validate();
   if (session.views.size() < 2)
     throw FormatError(session_folder / kManifestName,
                       "a reconstruction needs at least 2 views, the session has " +

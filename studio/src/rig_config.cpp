@@ -8,34 +8,13 @@
 #include "carousel/calib/rig_calibration.h"
 #include "carousel/core/error.h"
 #include "carousel/core/file_util.h"
+#include "carousel/core/json.h"
 #include "carousel/core/logging.h"
-#include "carousel/rig/gphoto_camera.h"
-#include "carousel/rig/serial_turntable.h"
-#include "carousel/studio/session.h"
 
 namespace carousel::studio {
 namespace {
 
 using nlohmann::json;
-
-template <typename T>
-T Get(const json& object, const char* key, const std::filesystem::path& source,
-      const std::string& where) {
-  if (!object.is_object() || !object.contains(key)) {
-    throw FormatError(source, where + " has no field '" + key + "'");
-  }
-  try {
-    return object.at(key).get<T>();
-  } catch (const json::exception&) {
-    throw FormatError(source, where + "." + key + " has the wrong type");
-  }
-}
-
-template <typename T>
-T GetOr(const json& object, const char* key, T fallback, const std::filesystem::path& source,
-        const std::string& where) {
-  return object.is_object() && object.contains(key) ? Get<T>(object, key, source, where) : fallback;
-}
 
 }  // namespace
 
@@ -113,98 +92,81 @@ std::string RigConfigToJsonText(const RigConfig& config) {
 }
 
 RigConfig RigConfigFromJsonText(const std::string& text, const std::filesystem::path& source) {
-  json j;
-  try {
-    j = json::parse(text);
-  } catch (const json::parse_error& e) {
-    throw FormatError(source, std::string("not valid JSON: ") + e.what());
+  const json j = ParseJsonText(text, source);
+  const JsonReader rig(j, source);
+  if (!j.is_object() || rig.OptionalString("format") != "carousel-rig") {
+    rig.Fail("not a Carousel rig file (format is not \"carousel-rig\")");
   }
-  if (GetOr<std::string>(j, "format", "", source, "rig") != "carousel-rig") {
-    throw FormatError(source, "not a Carousel rig file (format is not \"carousel-rig\")");
-  }
-  if (Get<int>(j, "version", source, "rig") != 1) {
-    throw FormatError(source, "unsupported rig file version (this build reads version 1)");
+  if (rig.Int("version") != 1) {
+    rig.Fail("unsupported rig file version (this build reads version 1)");
   }
   RigConfig config;
-  const json& t = j.contains("turntable") ? j["turntable"] : json();
-  config.turntable.port = Get<std::string>(t, "port", source, "turntable");
-  if (t.contains("steps_per_rev")) {
-    config.turntable.steps_per_rev = Get<int>(t, "steps_per_rev", source, "turntable");
-  }
-  if (t.contains("microsteps")) {
-    config.turntable.microsteps = Get<int>(t, "microsteps", source, "turntable");
-  }
-  if (t.contains("gear")) {
-    const std::string gear = Get<std::string>(t, "gear", source, "turntable");
-    const std::size_t colon = gear.find(':');
+  const JsonReader turntable = rig.ObjectOrEmpty("turntable");
+  config.turntable.port = turntable.String("port");
+  config.turntable.steps_per_rev = turntable.OptionalInt("steps_per_rev");
+  config.turntable.microsteps = turntable.OptionalInt("microsteps");
+  if (const std::optional<std::string> gear = turntable.OptionalString("gear")) {
+    const std::size_t colon = gear->find(':');
     try {
       if (colon == std::string::npos) throw std::invalid_argument("gear");
-      config.turntable.gear_num = std::stoi(gear.substr(0, colon));
-      config.turntable.gear_den = std::stoi(gear.substr(colon + 1));
+      config.turntable.gear_num = std::stoi(gear->substr(0, colon));
+      config.turntable.gear_den = std::stoi(gear->substr(colon + 1));
     } catch (const std::logic_error&) {
-      throw FormatError(source, "turntable.gear must be \"NUM:DEN\", not \"" + gear + "\"");
+      turntable.Fail(turntable.FieldPath("gear") + " must be \"NUM:DEN\", not \"" + *gear + "\"");
     }
   }
-  if (!j.contains("cameras") || !j["cameras"].is_array()) {
-    throw FormatError(source, "rig has no \"cameras\" list");
-  }
+  const std::vector<JsonReader> cameras = rig.Array("cameras");
   // The cameras' calibration from a rig calibration file (carousel calibrate rig), camera i
   // of the rig being camera i of the file; or per camera in the rig file itself.
   std::optional<calib::RigCalibration> calibration;
-  if (j.contains("calibration_file")) {
-    std::filesystem::path file = Get<std::string>(j, "calibration_file", source, "rig");
+  if (const std::optional<std::string> name = rig.OptionalString("calibration_file")) {
+    std::filesystem::path file = *name;
     if (file.is_relative() && !source.empty()) file = source.parent_path() / file;
     calibration = calib::ReadRigCalibration(file);
     config.calibration_file = file;
-    if (calibration->cameras.size() != j["cameras"].size()) {
-      throw FormatError(source, "calibration_file " + file.string() + " calibrates " +
-                                    std::to_string(calibration->cameras.size()) +
-                                    " camera(s), the rig has " +
-                                    std::to_string(j["cameras"].size()));
+    if (calibration->cameras.size() != cameras.size()) {
+      rig.Fail("calibration_file " + file.string() + " calibrates " +
+               std::to_string(calibration->cameras.size()) + " camera(s), the rig has " +
+               std::to_string(cameras.size()));
     }
   }
-  for (std::size_t i = 0; i < j["cameras"].size(); ++i) {
-    const json& c = j["cameras"][i];
-    const std::string where = "cameras[" + std::to_string(i) + "]";
+  for (std::size_t i = 0; i < cameras.size(); ++i) {
+    const JsonReader& c = cameras[i];
     RigCameraConfig camera;
-    camera.port = Get<std::string>(c, "port", source, where);
-    camera.model = GetOr<std::string>(c, "model", "", source, where);
-    camera.serial = GetOr<std::string>(c, "serial", "", source, where);
-    camera.settings = GetOr<std::map<std::string, std::string>>(c, "settings", {}, source, where);
+    camera.port = c.String("port");
+    camera.model = c.OptionalString("model").value_or("");
+    camera.serial = c.OptionalString("serial").value_or("");
+    camera.settings = c.OptionalStringMap("settings").value_or(camera.settings);
     if (calibration) {
       const calib::RigCameraCalibration& calibrated = calibration->cameras[i];
       if (!camera.serial.empty() && !calibrated.serial.empty() &&
           camera.serial != calibrated.serial) {
-        throw FormatError(source, where + " is the camera " + camera.serial +
-                                      ", the calibration file's camera " + std::to_string(i) +
-                                      " is " + calibrated.serial);
+        c.Fail(c.where() + " is the camera " + camera.serial + ", the calibration file's camera " +
+               std::to_string(i) + " is " + calibrated.serial);
       }
       camera.calibration = calibrated.camera;
-    } else if (!c.contains("calibration")) {
-      throw FormatError(source, where +
-                                    " has no calibration (run `carousel run --calibration` "
-                                    "and name its result in \"calibration_file\")");
+    } else if (!c.Has("calibration")) {
+      c.Fail(c.where() +
+             " has no calibration (run `carousel run --calibration` and name its result in "
+             "\"calibration_file\")");
     } else {
-      camera.calibration = CameraModelFromJson(c["calibration"], source, where + ".calibration");
+      camera.calibration = CameraModelFromJson(c.Object("calibration"));
     }
     config.cameras.push_back(std::move(camera));
   }
-  const json& p = j.contains("capture") ? j["capture"] : json::object();
-  config.capture.stops = GetOr<int>(p, "stops", config.capture.stops, source, "capture");
-  config.capture.settle_ms =
-      GetOr<int>(p, "settle_ms", config.capture.settle_ms, source, "capture");
-  config.capture.delete_from_camera =
-      GetOr<bool>(p, "delete_from_camera", config.capture.delete_from_camera, source, "capture");
-  config.capture.shutter =
-      GetOr<std::string>(p, "shutter", config.capture.shutter, source, "capture");
-  config.capture.shutter_pulse_ms =
-      GetOr<int>(p, "shutter_pulse_ms", config.capture.shutter_pulse_ms, source, "capture");
-  config.capture.move_timeout_s =
-      GetOr<double>(p, "move_timeout_s", config.capture.move_timeout_s, source, "capture");
-  config.capture.camera_timeout_s =
-      GetOr<double>(p, "camera_timeout_s", config.capture.camera_timeout_s, source, "capture");
-  config.backdrop = GetOr<std::string>(j, "backdrop", config.backdrop, source, "rig");
-  config.backgrounds = GetOr<std::string>(j, "backgrounds", "", source, "rig");
+  const JsonReader capture = rig.ObjectOrEmpty("capture");
+  CapturePlan& plan = config.capture;
+  plan.stops = capture.OptionalInt("stops").value_or(plan.stops);
+  plan.settle_ms = capture.OptionalInt("settle_ms").value_or(plan.settle_ms);
+  plan.delete_from_camera =
+      capture.OptionalBool("delete_from_camera").value_or(plan.delete_from_camera);
+  plan.shutter = capture.OptionalString("shutter").value_or(plan.shutter);
+  plan.shutter_pulse_ms = capture.OptionalInt("shutter_pulse_ms").value_or(plan.shutter_pulse_ms);
+  plan.move_timeout_s = capture.OptionalNumber("move_timeout_s").value_or(plan.move_timeout_s);
+  plan.camera_timeout_s =
+      capture.OptionalNumber("camera_timeout_s").value_or(plan.camera_timeout_s);
+  config.backdrop = rig.OptionalString("backdrop").value_or(config.backdrop);
+  config.backgrounds = rig.OptionalString("backgrounds").value_or("");
   // Relative to the rig file.
   if (!config.backgrounds.empty() && config.backgrounds.is_relative() && !source.empty())
     config.backgrounds = source.parent_path() / config.backgrounds;
@@ -223,51 +185,6 @@ RigConfig ReadRigConfig(const std::filesystem::path& path) {
 
 void WriteRigConfig(const std::filesystem::path& path, const RigConfig& config) {
   WriteFileAtomic(path, RigConfigToJsonText(config));
-}
-
-RigBackends OpenHardwareRig(const RigConfig& config) {
-  config.Validate();
-  RigBackends rig;
-  rig.plan = config.capture;
-  rig::SerialTurntableOptions table_options;
-  table_options.port = config.turntable.port;
-  auto table = std::make_shared<rig::SerialTurntable>(table_options);
-  const RigTurntableConfig& t = config.turntable;
-  if (t.steps_per_rev || t.microsteps || t.gear_num) {
-    cp_config c = table->Config();
-    if (t.steps_per_rev) c.steps_per_rev = static_cast<std::uint16_t>(*t.steps_per_rev);
-    if (t.microsteps) c.microsteps = static_cast<std::uint16_t>(*t.microsteps);
-    if (t.gear_num) c.gear_num = static_cast<std::uint16_t>(*t.gear_num);
-    if (t.gear_den) c.gear_den = static_cast<std::uint16_t>(*t.gear_den);
-    table->SetConfig(c);
-  }
-  rig.turntable = table;
-  if (config.capture.shutter == "controller") {
-    const auto pulse = static_cast<std::uint16_t>(config.capture.shutter_pulse_ms);
-    rig.release = [table, pulse](const std::vector<int>& cameras) {
-      std::uint8_t mask = 0;
-      for (const int c : cameras) mask |= static_cast<std::uint8_t>(1u << c);
-      table->Trigger(mask, CP_OUTPUT_SHUTTER, pulse);
-    };
-  }
-  const auto timeout =
-      std::chrono::milliseconds(static_cast<long long>(config.capture.camera_timeout_s * 1000));
-  for (const RigCameraConfig& c : config.cameras) {
-    rig::GPhotoCameraOptions options;
-    options.port = c.port;
-    options.model = c.model;
-    auto camera = std::make_unique<rig::GPhotoCamera>(options);
-    const rig::CameraInfo info = camera->Identify();
-    if (!c.serial.empty() && info.serial != c.serial) {
-      throw DeviceError("camera " + c.port, "has serial " + info.serial + ", the rig expects " +
-                                                c.serial + " (cameras swapped?)");
-    }
-    for (const auto& [name, value] : c.settings) camera->SetSetting(name, value, timeout);
-    CAROUSEL_LOG_INFO("camera " << info.serial << " (" << info.model << ") on " << c.port);
-    rig.cameras.push_back(std::move(camera));
-    rig.cam_from_table.push_back(c.calibration);
-  }
-  return rig;
 }
 
 }  // namespace carousel::studio

@@ -147,10 +147,22 @@ SelfCheckItem CheckTestData(const std::filesystem::path& data_dir) {
 
 }  // namespace
 
-void SelfCheckOptions::Validate() const {
-  CAROUSEL_THROW_IF(points < 1, InvalidArgument,
-                    "SelfCheckOptions.points must be >= 1, got " << points);
+const OptionTable<SelfCheckOptions>& SelfCheckOptions::Fields() {
+  using O = SelfCheckOptions;
+  static const OptionTable<O> table = [] {
+    OptionTable<O> t;
+    t.Add(&O::data_dir,
+          {.name = "data", .help = "shared test data folder (default: $CAROUSEL_SHARED_DATA_DIR)"});
+    t.Add(&O::scratch_dir,
+          {.name = "scratch", .help = "folder for temporary files (default: the system's)"});
+    t.Add(&O::points,
+          {.name = "points", .help = "random points in the camera-model check", .min = 1});
+    return t;
+  }();
+  return table;
 }
+
+void SelfCheckOptions::Validate() const { Fields().Check(*this); }
 
 bool SelfCheckResult::AllPassed() const {
   for (const SelfCheckItem& item : items) {

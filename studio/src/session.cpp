@@ -2,145 +2,24 @@
 
 #include <unistd.h>
 
-#include <cmath>
-#include <cstdint>
 #include <cstdio>
 #include <ctime>
-#include <limits>
 #include <numbers>
+#include <optional>
+#include <string_view>
 
 #include <nlohmann/json.hpp>
 
 #include "carousel/core/error.h"
 #include "carousel/core/file_util.h"
+#include "carousel/core/json.h"
 
 namespace carousel::studio {
 namespace {
 
 using nlohmann::json;
 
-}  // namespace
-
-json CameraModelToJson(const CameraModel& camera) {
-  const Rigid3d& pose = camera.cam_from_world;
-  json rotation = json::array();
-  for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 3; ++c) rotation.push_back(pose.rotation(r, c));
-  }
-  return {{"width", camera.width},
-          {"height", camera.height},
-          {"fx", camera.fx},
-          {"fy", camera.fy},
-          {"cx", camera.cx},
-          {"cy", camera.cy},
-          {"distortion",
-           {camera.distortion.k1, camera.distortion.k2, camera.distortion.p1, camera.distortion.p2,
-            camera.distortion.k3}},
-          {"cam_from_world",
-           {{"rotation_row_major", rotation},
-            {"translation", {pose.translation.x(), pose.translation.y(), pose.translation.z()}}}}};
-}
-
-namespace {
-
-json CameraToJson(const CameraModel& camera) { return CameraModelToJson(camera); }
-
-// Field access that turns every JSON problem into a FormatError naming the field.
-class Reader {
- public:
-  explicit Reader(std::filesystem::path path) : path_(std::move(path)) {}
-
-  [[noreturn]] void Fail(const std::string& what) const { throw FormatError(path_, what); }
-
-  const json& Field(const json& object, const std::string& key, const std::string& where) const {
-    if (!object.is_object()) Fail(where + " is not an object");
-    const auto it = object.find(key);
-    if (it == object.end()) Fail(where + " has no field '" + key + "'");
-    return *it;
-  }
-  double Number(const json& object, const std::string& key, const std::string& where) const {
-    const json& value = Field(object, key, where);
-    if (!value.is_number()) Fail(where + "." + key + " is not a number");
-    const double number = value.get<double>();
-    if (!std::isfinite(number)) Fail(where + "." + key + " is not finite");
-    return number;
-  }
-  int Integer(const json& object, const std::string& key, const std::string& where) const {
-    const json& value = Field(object, key, where);
-    if (!value.is_number_integer()) Fail(where + "." + key + " is not an integer");
-    const auto wide = value.get<std::int64_t>();
-    if (wide < std::numeric_limits<int>::min() || wide > std::numeric_limits<int>::max()) {
-      Fail(where + "." + key + " is out of range");
-    }
-    return static_cast<int>(wide);
-  }
-  std::string String(const json& object, const std::string& key, const std::string& where,
-                     bool required = true) const {
-    if (!required && (!object.is_object() || !object.contains(key))) return {};
-    const json& value = Field(object, key, where);
-    if (!value.is_string()) Fail(where + "." + key + " is not a string");
-    return value.get<std::string>();
-  }
-  std::vector<double> Numbers(const json& value, std::size_t count,
-                              const std::string& where) const {
-    if (!value.is_array() || value.size() != count) {
-      Fail(where + " must be an array of " + std::to_string(count) + " numbers");
-    }
-    std::vector<double> numbers;
-    for (const json& item : value) {
-      if (!item.is_number()) Fail(where + " holds a non-number");
-      numbers.push_back(item.get<double>());
-    }
-    return numbers;
-  }
-  // A relative path that stays inside the session folder.
-  std::string RelativePath(const json& object, const std::string& key, const std::string& where,
-                           bool required = true) const {
-    std::string text = String(object, key, where, required);
-    if (text.empty()) {
-      if (required) Fail(where + "." + key + " is empty");
-      return text;
-    }
-    std::string field = where;
-    field.append(".").append(key);
-    const std::filesystem::path path(text);
-    if (path.is_absolute()) Fail(field.append(" is an absolute path: ").append(text));
-    for (const auto& part : path) {
-      if (part == "..") Fail(field.append(" leaves the session folder: ").append(text));
-    }
-    return text;
-  }
-
-  CameraModel Camera(const json& value, const std::string& where) const {
-    CameraModel camera;
-    camera.width = Integer(value, "width", where);
-    camera.height = Integer(value, "height", where);
-    camera.fx = Number(value, "fx", where);
-    camera.fy = Number(value, "fy", where);
-    camera.cx = Number(value, "cx", where);
-    camera.cy = Number(value, "cy", where);
-    const std::vector<double> d =
-        Numbers(Field(value, "distortion", where), 5, where + ".distortion");
-    camera.distortion = {d[0], d[1], d[2], d[3], d[4]};
-    const json& pose = Field(value, "cam_from_world", where);
-    const std::vector<double> r =
-        Numbers(Field(pose, "rotation_row_major", where + ".cam_from_world"), 9,
-                where + ".cam_from_world.rotation_row_major");
-    const std::vector<double> t = Numbers(Field(pose, "translation", where + ".cam_from_world"), 3,
-                                          where + ".cam_from_world.translation");
-    for (int i = 0; i < 9; ++i) camera.cam_from_world.rotation(i / 3, i % 3) = r[i];
-    camera.cam_from_world.translation = Eigen::Vector3d(t[0], t[1], t[2]);
-    try {
-      camera.Validate();
-    } catch (const InvalidArgument& e) {
-      Fail(where + ": " + e.what());
-    }
-    return camera;
-  }
-
- private:
-  std::filesystem::path path_;
-};
+constexpr std::string_view kFolder = "session folder";
 
 // ".<name><tag><pid>" beside `path` (built by append: GCC 12 warns falsely on "." + string).
 std::filesystem::path HiddenSibling(const std::filesystem::path& path, const char* tag) {
@@ -150,11 +29,6 @@ std::filesystem::path HiddenSibling(const std::filesystem::path& path, const cha
 }
 
 }  // namespace
-
-CameraModel CameraModelFromJson(const json& value, const std::filesystem::path& file,
-                                const std::string& where) {
-  return Reader(file).Camera(value, where);
-}
 
 std::string NowUtc() {
   const std::time_t now = std::time(nullptr);
@@ -172,7 +46,7 @@ void WriteSessionManifest(const std::filesystem::path& folder, const Session& se
                   {"camera", view.camera},
                   {"stop", view.stop},
                   {"table_angle_deg", view.table_angle_deg},
-                  {"camera_model", CameraToJson(view.camera_model)}};
+                  {"camera_model", CameraModelToJson(view.camera_model)}};
     if (!view.mask.empty()) entry["mask"] = view.mask;
     if (!view.sha256.empty()) entry["sha256"] = view.sha256;
     if (view.trigger_offset_ms >= 0) entry["trigger_offset_ms"] = view.trigger_offset_ms;
@@ -198,80 +72,48 @@ void WriteSessionManifest(const std::filesystem::path& folder, const Session& se
 
 Session ReadSession(const std::filesystem::path& folder) {
   const std::filesystem::path path = folder / kManifestName;
-  const std::vector<std::uint8_t> bytes = ReadFileBytes(path);
-  json manifest;
-  try {
-    manifest = json::parse(bytes.begin(), bytes.end());
-  } catch (const json::parse_error& e) {
-    throw FormatError(path, std::string("not valid JSON: ") + e.what());
-  }
-  const Reader read(path);
-  if (read.String(manifest, "format", "manifest") != "carousel-session") {
+  const json manifest = ParseJsonFile(path);
+  const JsonReader read(manifest, path);
+  if (read.String("format") != "carousel-session") {
     read.Fail("not a Carousel session manifest (format is not 'carousel-session')");
   }
   Session session;
-  session.version = read.Integer(manifest, "version", "manifest");
+  session.version = read.Int("version");
   if (session.version < 1 || session.version > kSessionFormatVersion) {
     read.Fail("session format version " + std::to_string(session.version) +
               " is not supported (this build reads 1.." + std::to_string(kSessionFormatVersion) +
               ")");
   }
-  session.product = read.String(manifest, "product", "manifest");
-  session.created_utc = read.String(manifest, "created_utc", "manifest", false);
-  session.source = read.String(manifest, "source", "manifest", false);
-  session.frame = read.String(manifest, "frame", "manifest");
+  session.product = read.String("product");
+  session.created_utc = read.OptionalString("created_utc").value_or("");
+  session.source = read.OptionalString("source").value_or("");
+  session.frame = read.String("frame");
   if (session.frame != "turntable" && session.frame != "dataset") {
-    read.Fail("manifest.frame must be 'turntable' or 'dataset', got '" + session.frame + "'");
+    read.Fail("frame must be 'turntable' or 'dataset', got '" + session.frame + "'");
   }
-  const json& views = read.Field(manifest, "views", "manifest");
-  if (!views.is_array()) read.Fail("manifest.views is not an array");
-  for (std::size_t i = 0; i < views.size(); ++i) {
-    const std::string where = "views[" + std::to_string(i) + "]";
+  for (const JsonReader& entry : read.Array("views")) {
     SessionView view;
-    view.image = read.RelativePath(views[i], "image", where);
-    view.mask = read.RelativePath(views[i], "mask", where, false);
-    if (views[i].contains("sha256") && views[i]["sha256"].is_string())
-      view.sha256 = views[i]["sha256"].get<std::string>();
-    if (views[i].contains("trigger_offset_ms"))
-      view.trigger_offset_ms = read.Number(views[i], "trigger_offset_ms", where);
-    view.camera = read.Integer(views[i], "camera", where);
-    view.stop = read.Integer(views[i], "stop", where);
-    view.table_angle_deg = read.Number(views[i], "table_angle_deg", where);
-    view.camera_model =
-        read.Camera(read.Field(views[i], "camera_model", where), where + ".camera_model");
+    view.image = entry.RelativePath("image", kFolder);
+    view.mask = entry.OptionalRelativePath("mask", kFolder).value_or("");
+    view.sha256 = entry.OptionalString("sha256").value_or("");
+    view.trigger_offset_ms = entry.OptionalNumber("trigger_offset_ms").value_or(-1.0);
+    view.camera = entry.Int("camera");
+    view.stop = entry.Int("stop");
+    view.table_angle_deg = entry.Number("table_angle_deg");
+    view.camera_model = CameraModelFromJson(entry.Object("camera_model"));
     session.views.push_back(view);
   }
-  if (manifest.contains("stages")) {
-    const json& stages = manifest["stages"];
-    if (!stages.is_object()) read.Fail("manifest.stages is not an object");
-    for (const auto& [name, state] : stages.items()) {
-      if (!state.is_string()) read.Fail("manifest.stages." + name + " is not a string");
-      session.stages[name] = state.get<std::string>();
+  session.stages = read.OptionalStringMap("stages").value_or(session.stages);
+  session.stage_inputs = read.OptionalStringMap("stage_inputs").value_or(session.stage_inputs);
+  if (const std::optional<JsonReader> truth = read.OptionalObject("ground_truth")) {
+    session.ground_truth.mesh = truth->OptionalRelativePath("mesh", kFolder).value_or("");
+    for (const JsonReader& mask : truth->Array("masks")) {
+      session.ground_truth.masks.push_back(mask.AsRelativePath(kFolder));
     }
-  }
-  if (manifest.contains("stage_inputs")) {
-    const json& inputs = manifest["stage_inputs"];
-    if (!inputs.is_object()) read.Fail("manifest.stage_inputs is not an object");
-    for (const auto& [name, fingerprint] : inputs.items()) {
-      if (!fingerprint.is_string()) read.Fail("manifest.stage_inputs." + name + " is not a string");
-      session.stage_inputs[name] = fingerprint.get<std::string>();
+    for (const JsonReader& depth : truth->Array("depth")) {
+      session.ground_truth.depth.push_back(depth.AsRelativePath(kFolder));
     }
-  }
-  if (manifest.contains("ground_truth")) {
-    const json& truth = manifest["ground_truth"];
-    session.ground_truth.mesh = read.RelativePath(truth, "mesh", "ground_truth", false);
-    for (const char* key : {"masks", "depth"}) {
-      const json& list = read.Field(truth, key, "ground_truth");
-      if (!list.is_array()) read.Fail(std::string("ground_truth.") + key + " is not an array");
-      auto& out =
-          std::string(key) == "masks" ? session.ground_truth.masks : session.ground_truth.depth;
-      for (std::size_t i = 0; i < list.size(); ++i) {
-        const json wrapper = {{"path", list[i]}};
-        out.push_back(read.RelativePath(
-            wrapper, "path", std::string("ground_truth.") + key + "[" + std::to_string(i) + "]"));
-      }
-    }
-    session.ground_truth.depth_unit_m = read.Number(truth, "depth_unit_m", "ground_truth");
+    session.ground_truth.depth_unit_m = truth->Number("depth_unit_m");
   }
   return session;
 }

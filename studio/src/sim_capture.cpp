@@ -28,12 +28,141 @@ const std::map<std::string, std::string>& SceneNames() {
 
 }  // namespace
 
+void ParseImageSize(const std::string& text, const std::string& flag, int* width, int* height) {
+  const std::size_t x = text.find('x');
+  try {
+    std::size_t used_w = 0, used_h = 0;
+    const int w = std::stoi(text.substr(0, x), &used_w);
+    const std::string rest = x == std::string::npos ? "" : text.substr(x + 1);
+    const int h = std::stoi(rest, &used_h);
+    if (used_w != x || used_h != rest.size() || w < 1 || h < 1) throw std::invalid_argument(text);
+    *width = w;
+    *height = h;
+  } catch (const std::logic_error&) {
+    throw InvalidArgument("--" + flag + " must look like 5184x3456, got '" + text + "'");
+  }
+}
+
+Eigen::Vector3d ParseBackdropColour(const std::string& text, const std::string& flag) {
+  if (text == "white") return {0.96, 0.96, 0.96};
+  if (text == "grey" || text == "gray") return {0.5, 0.5, 0.5};
+  if (text == "green") return {0.1, 0.65, 0.25};
+  if (text == "black") return {0.03, 0.03, 0.03};
+  if (text.size() == 7 && text[0] == '#') {
+    try {
+      Eigen::Vector3d colour;
+      for (int c = 0; c < 3; ++c) {
+        std::size_t used = 0;
+        colour[c] = std::stoi(text.substr(1 + 2 * c, 2), &used, 16) / 255.0;
+        if (used != 2) throw std::invalid_argument(text);
+      }
+      return colour;
+    } catch (const std::logic_error&) {
+    }
+  }
+  throw InvalidArgument("--" + flag + " must be white, grey, green, black or #rrggbb, got '" +
+                        text + "'");
+}
+
+const OptionTable<SimCaptureOptions>& SimCaptureOptions::Fields() {
+  using O = SimCaptureOptions;
+  static const OptionTable<O> table = [] {
+    OptionTable<O> t;
+    t.Add(&O::scene,
+          {.name = "scene", .help = "shoe, bottle, avocado, duck, or a .gltf/.glb/.obj file"});
+    t.Add(&O::data_dir, {.name = "data", .help = "shared test data folder (for model names)"});
+    t.Add(&O::stops, {.name = "views", .help = "turntable stops per camera", .min = 1, .max = 3600});
+    t.AddText(
+        {.name = "size", .help = "image size WxH", .unit = "px"},
+        [](const O& o) { return std::to_string(o.rig.width) + "x" + std::to_string(o.rig.height); },
+        [](O& o, const std::string& text) {
+          ParseImageSize(text, "size", &o.rig.width, &o.rig.height);
+        });
+    t.Add({.name = "elevations",
+           .help = "camera elevations, one camera each (e.g. 15,35,60)",
+           .unit = "deg",
+           .min = -10,
+           .max = 85},
+          [](O& o) -> OptionRef { return &o.rig.elevations_deg; });
+    t.Add({.name = "focal-mm",
+           .help = "lens focal length (APS-C sensor)",
+           .unit = "mm",
+           .min = 0,
+           .min_exclusive = true},
+          [](O& o) -> OptionRef { return &o.rig.focal_length_mm; });
+    t.Add({.name = "distance",
+           .help = "camera distance to the object's centre",
+           .unit = "m",
+           .min = 0,
+           .min_exclusive = true,
+           .special = 0,
+           .special_meaning = "frame the object"},
+          [](O& o) -> OptionRef { return &o.rig.distance_m; });
+    t.Add({.name = "noise", .help = "sensor noise", .unit = "8-bit levels", .min = 0, .max = 64},
+          [](O& o) -> OptionRef { return &o.render.noise_sigma; });
+    t.Add({.name = "seed", .help = "noise seed", .advanced = true},
+          [](O& o) -> OptionRef { return &o.render.seed; });
+    t.Add(&O::jpeg_quality,
+          {.name = "jpeg-quality", .help = "JPEG quality of the photos", .min = 1, .max = 100});
+    t.Add({.name = "samples",
+           .help = "anti-aliasing samples per pixel and axis",
+           .min = 1,
+           .max = 4,
+           .advanced = true},
+          [](O& o) -> OptionRef { return &o.render.samples_per_axis; });
+    t.AddText({.name = "backdrop", .help = "white, grey, green, black or #rrggbb"},
+              [](const O&) { return std::string(); },
+              [](O& o, const std::string& text) {
+                const Eigen::Vector3d colour = ParseBackdropColour(text, "backdrop");
+                o.render.backdrop_top = colour;
+                o.render.backdrop_bottom = 0.9 * colour;
+              });
+    t.Add({.name = "plate-radius",
+           .help = "turntable plate radius",
+           .unit = "m",
+           .min = 0,
+           .special = 0,
+           .special_meaning = "no plate"},
+          [](O& o) -> OptionRef { return &o.render.plate_radius_m; });
+    t.Add({.name = "target-height",
+           .help = "scale the model to this height",
+           .unit = "m",
+           .min = 0,
+           .min_exclusive = true,
+           .special = 0,
+           .special_meaning = "as authored"},
+          [](O& o) -> OptionRef { return &o.placement.target_height_m; });
+    t.Add({.name = "scale",
+           .help = "scale factor when no --target-height",
+           .min = 0,
+           .min_exclusive = true},
+          [](O& o) -> OptionRef { return &o.placement.scale; });
+    t.AddText(
+        {.name = "yaw-deg", .help = "turn the model on the plate first", .unit = "deg"},
+        [](const O& o) { return std::to_string(o.placement.yaw_rad * 180.0 / std::numbers::pi); },
+        [](O& o, const std::string& text) {
+          try {
+            std::size_t used = 0;
+            const double deg = std::stod(text, &used);
+            if (used != text.size() || !std::isfinite(deg)) throw std::invalid_argument(text);
+            o.placement.yaw_rad = deg * std::numbers::pi / 180.0;
+          } catch (const std::logic_error&) {
+            throw InvalidArgument("--yaw-deg must be a number of degrees, got '" + text + "'");
+          }
+        });
+    t.Add({.name = "lit",
+           .help = "light the scene (off: render the albedo)",
+           .negative_name = "unlit"},
+          [](O& o) -> OptionRef { return &o.render.lit; });
+    t.Add(&O::product, {.name = "product", .help = "product name for the manifest"});
+    return t;
+  }();
+  return table;
+}
+
 void SimCaptureOptions::Validate() const {
-  CAROUSEL_THROW_IF(scene.empty(), InvalidArgument, "SimCaptureOptions.scene is empty");
-  CAROUSEL_THROW_IF(stops < 1 || stops > 3600, InvalidArgument,
-                    "SimCaptureOptions.stops must be in 1..3600, got " << stops);
-  CAROUSEL_THROW_IF(jpeg_quality < 1 || jpeg_quality > 100, InvalidArgument,
-                    "SimCaptureOptions.jpeg_quality must be in 1..100, got " << jpeg_quality);
+  CAROUSEL_THROW_IF(scene.empty(), InvalidArgument, "--scene is empty");
+  Fields().Check(*this);
   placement.Validate();
   rig.Validate();
   render.Validate();

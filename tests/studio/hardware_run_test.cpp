@@ -28,7 +28,7 @@
 #include "carousel/studio/run_session.h"
 #include "carousel/studio/session.h"
 #include "carousel/studio/sim_capture.h"
-#include "carousel/studio/turntable_command.h"
+#include "carousel/studio/defaults.h"
 #include "carousel/testing/testing.h"
 
 namespace carousel::studio {

@@ -152,5 +152,27 @@ TEST(SessionTest, ReaderNamesTheProblem) {
                              "views[0].table_angle_deg is not a number");
 }
 
+// A number that does not fit (1e999 overflows a double; nlohmann reports it as out_of_range,
+// not as a parse error): a FormatError naming session.json and the field, like any other.
+TEST(SessionTest, ANumberOutOfRangeNamesTheManifestAndTheField) {
+  TempDir dir;
+  const std::string manifest = (dir / kManifestName).string();
+  const auto write_view = [&](const std::string& fields) {
+    testing::WriteBytes(dir / kManifestName,
+                        R"({"format": "carousel-session", "version": 1, "product": "x",
+                            "frame": "turntable", "views": [{"image": "images/a.jpg", )" +
+                            fields + "}]}");
+  };
+  write_view(R"("camera": 0, "stop": 0, "table_angle_deg": 1e999)");
+  EXPECT_THAT(
+      [&] { ReadSession(dir.path()); },
+      ::testing::ThrowsMessage<FormatError>(::testing::AllOf(
+          ::testing::HasSubstr(manifest), ::testing::HasSubstr("views[0].table_angle_deg"))));
+  // An integer too large for the field's int.
+  write_view(R"("camera": 3000000000, "stop": 0, "table_angle_deg": 0)");
+  CAROUSEL_EXPECT_THROW_WITH(ReadSession(dir.path()), FormatError,
+                             "views[0].camera is out of range");
+}
+
 }  // namespace
 }  // namespace carousel::studio

@@ -123,7 +123,7 @@ TEST_F(TextureSessionTest, HeldOutViewsMatchThePhotosAndBlendingWithCorrectionHe
 TEST_F(TextureSessionTest, CorrectionRemovesTheBackgroundATooLargeMeshPicksUp) {
   Progress progress;
   TextureSessionOptions options;
-  options.size = 1024;
+  options.atlas.size.size = 1024;
   // The correction is as good as the masks it is given: the exact ones here (the
   // reconstruction's fill the heel loop's eye, 6 x 12 pixels at this size, whose backdrop no
   // mask then shows). The reconstructed mesh, corrected: what is green here comes from pixels
@@ -187,7 +187,7 @@ TEST_F(TextureSessionTest, BadInputIsNamed) {
     const std::vector<View> views = SessionViews(Folder(), s);
     const Mesh mesh = ReadMesh(Folder() / "recon" / "mesh.ply", {.read_uvs = false});
     const texture::GroupingResult grouping = texture::GroupFaces(mesh, views, {}, progress);
-    CAROUSEL_EXPECT_THROW_WITH(texture::TransferTexture(mesh, views, grouping, {}, progress),
+    CAROUSEL_EXPECT_THROW_WITH(texture::TransferTexture(mesh, views, grouping, 1024, {}, progress),
                                InvalidArgument, "no UVs");
   }
 }

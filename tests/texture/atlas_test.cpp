@@ -8,6 +8,8 @@
 #include <map>
 #include <random>
 #include <set>
+#include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <Eigen/Geometry>
@@ -16,7 +18,10 @@
 #include "carousel/core/error.h"
 #include "carousel/core/mesh_io.h"
 #include "carousel/core/mesh_primitives.h"
+#include "carousel/core/options.h"
 #include "carousel/testing/testing.h"
+#include "carousel/texture/export.h"
+#include "carousel/texture/texture_map.h"
 
 namespace carousel::texture {
 namespace {
@@ -38,7 +43,7 @@ std::vector<NamedMesh> ProceduralMeshes() {
 
 AtlasOptions SmallAtlas() {
   AtlasOptions options;
-  options.packing.size = 1024;
+  options.size.size = 1024;
   options.packing.gutter_texels = 4;
   return options;
 }
@@ -230,10 +235,10 @@ TEST(AtlasTest, RectangularChartsPackTightly) {
     chart_of_face.push_back(c);
   }
   PackingOptions options;
-  options.size = 1024;
   options.gutter_texels = 4;
+  const int size = 1024;
   Progress progress;
-  const PackingResult packed = PackCharts(uv, chart_of_face, 60, options, progress);
+  const PackingResult packed = PackCharts(uv, chart_of_face, 60, size, options, progress);
   EXPECT_GT(packed.utilization, 0.85);
   // Each chart's box in texels, grown by half the gutter: no two overlap.
   std::vector<cv::Rect2d> boxes;
@@ -243,7 +248,7 @@ TEST(AtlasTest, RectangularChartsPackTightly) {
       for (const auto& p : packed.uv[f]) {
         EXPECT_GE(p.minCoeff(), 0.0);
         EXPECT_LE(p.maxCoeff(), 1.0);
-        box.extend(p * options.size);
+        box.extend(p * size);
       }
     EXPECT_NEAR(box.volume(), sizes[c].prod() * std::pow(packed.texels_per_metre, 2),
                 1e-6 * box.volume());
@@ -289,9 +294,9 @@ TEST(AtlasTest, ObbPackingGivesMoreTexelsThanAabb) {
     builder.Parameterize({}, progress);
     PackingOptions options;
     options.mode = PackingMode::kAabb;
-    const double aabb = builder.Pack(options, progress).texels_per_metre;
+    const double aabb = builder.Pack(options, 4096, progress).texels_per_metre;
     options.mode = PackingMode::kObb;
-    const double obb = builder.Pack(options, progress).texels_per_metre;
+    const double obb = builder.Pack(options, 4096, progress).texels_per_metre;
     EXPECT_GT(obb, aabb) << model;
     ratios += obb / aabb / 3.0;
   }
@@ -316,11 +321,96 @@ TEST(AtlasTest, BadInput) {
   degenerate.add_vertex({1.0, 1.0, 1.0});  // isolated
   ExpectValidAtlas("degenerate", degenerate);
   AtlasBuilder builder(MakeIcosphere(0.1, 1));
-  CAROUSEL_EXPECT_THROW_WITH(builder.Pack({}, progress), InvalidArgument, "flatten");
+  CAROUSEL_EXPECT_THROW_WITH(builder.Pack({}, 1024, progress), InvalidArgument, "flatten");
   AtlasOptions bad = SmallAtlas();
   bad.charts.seeds = 0;
   Mesh sphere = MakeIcosphere(0.1, 1);
   CAROUSEL_EXPECT_THROW_WITH(BuildAtlas(&sphere, bad, progress), InvalidArgument, "seeds");
+}
+
+// Every option of the atlas and the texture map is described once, under the flags the
+// command line offers, with no name twice in what a texture session exposes (atlas, grouping,
+// transfer, export); Validate's range errors name the flag.
+TEST(AtlasTest, OptionsAreDescribedOnceUnderTheirFlags) {
+  const OptionTable<AtlasOptions>& atlas = AtlasOptions::Fields();
+  for (const char* name :
+       {"seeds", "packing", "size", "max-size", "density-coverage", "gutter", "rectify-stretch"})
+    EXPECT_NO_THROW(atlas.Find(name)) << name;
+  EXPECT_EQ(atlas.Find("size").info.special, 0.0);
+  EXPECT_EQ(atlas.Find("size").info.min, kMinAtlasSize);
+  EXPECT_EQ(atlas.Find("size").info.max, kMaxAtlasSize);
+  EXPECT_EQ(atlas.Find("packing").info.choices, (std::vector<std::string>{"obb", "aabb"}));
+  struct Session {
+    AtlasOptions atlas;
+    GroupingOptions grouping;
+    TransferOptions transfer;
+    ExportOptions output;
+  };
+  OptionTable<Session> session;
+  ASSERT_NO_THROW(session.Include(&Session::atlas, atlas)
+                      .Include(&Session::grouping, GroupingOptions::Fields())
+                      .Include(&Session::transfer, TransferOptions::Fields())
+                      .Include(&Session::output, ExportOptions::Fields()));
+  for (const char* name : {"exclude-views", "blend", "correction", "gain"})
+    EXPECT_NO_THROW(session.Find(name)) << name;
+  for (const auto& field : session.fields())
+    EXPECT_FALSE(field.info.help.empty()) << field.info.name;
+  // Choices are read and written as words.
+  AtlasOptions options;
+  atlas.Find("packing").text_set(options, "aabb");
+  EXPECT_EQ(options.packing.mode, PackingMode::kAabb);
+  EXPECT_EQ(atlas.Find("packing").text_get(options), "aabb");
+  CAROUSEL_EXPECT_THROW_WITH(atlas.Find("packing").text_set(options, "box"), InvalidArgument,
+                             "--packing must be obb or aabb, got 'box'");
+
+  options = {};
+  options.packing.gutter_texels = 99;
+  CAROUSEL_EXPECT_THROW_WITH(options.Validate(), InvalidArgument,
+                             "--gutter must be 0..64 texels, got 99");
+  options = {};
+  options.size.size = 20000;
+  CAROUSEL_EXPECT_THROW_WITH(options.Validate(), InvalidArgument,
+                             "--size must be 64..16384 texels, or 0 = automatic, got 20000");
+  options.size.size = 0;
+  options.size.max_size = 256;
+  CAROUSEL_EXPECT_THROW_WITH(options.Validate(), InvalidArgument, "--max-size must be 512..16384");
+  options = {};
+  options.charts.seeds = 0;
+  CAROUSEL_EXPECT_THROW_WITH(options.Validate(), InvalidArgument, "--seeds must be >= 1, got 0");
+  // A decided side is never 0 = automatic.
+  CAROUSEL_EXPECT_THROW_WITH(CheckAtlasSize(0), InvalidArgument,
+                             "--size must be 64..16384 texels, got 0");
+  TransferOptions transfer;
+  transfer.dilation_texels = -1;
+  CAROUSEL_EXPECT_THROW_WITH(transfer.Validate(), InvalidArgument, "--dilation must be 0..64");
+  GroupingOptions grouping;
+  grouping.max_island_faces = -1;
+  CAROUSEL_EXPECT_THROW_WITH(grouping.Validate(), InvalidArgument,
+                             "--max-island-faces must be >= 1 faces, or 0 = no island cleanup");
+  ExportOptions output;
+  output.name = "a/b";
+  CAROUSEL_EXPECT_THROW_WITH(output.Validate(), InvalidArgument,
+                             "--name must be a plain file stem");
+}
+
+// The atlas side is decided once: a set side as it is; automatic without photos
+// min(4096, max_size); transfer refuses a side outside the one range.
+TEST(AtlasTest, TheAtlasSideIsDecidedOnce) {
+  Progress progress;
+  const Mesh sphere = MakeIcosphere(0.1, 2);
+  AtlasOptions options;
+  Mesh automatic = sphere;
+  EXPECT_EQ(BuildAtlas(&automatic, options, progress).size, 4096);
+  options.size.max_size = 2048;
+  Mesh capped = sphere;
+  EXPECT_EQ(BuildAtlas(&capped, options, progress).size, 2048);
+  options.size.size = 1024;
+  Mesh set = sphere;
+  const AtlasResult result = BuildAtlas(&set, options, progress);
+  EXPECT_EQ(result.size, 1024);
+  EXPECT_TRUE(result.quality.Valid());
+  CAROUSEL_EXPECT_THROW_WITH(TransferTexture(set, {}, {}, 20000, {}, progress), InvalidArgument,
+                             "--size must be 64..16384 texels, got 20000");
 }
 
 }  // namespace

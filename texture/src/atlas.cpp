@@ -43,10 +43,21 @@ void FaceCorners(const Mesh& mesh, Mesh::FaceHandle face, Corners2* uv, Corners3
 
 }  // namespace
 
+const OptionTable<AtlasOptions>& AtlasOptions::Fields() {
+  static const OptionTable<AtlasOptions> table =
+      OptionTable<AtlasOptions>()
+          .Include(&AtlasOptions::charts, ChartOptions::Fields())
+          .Include(&AtlasOptions::parameterization, ParameterizationOptions::Fields())
+          .Include(&AtlasOptions::packing, PackingOptions::Fields())
+          .Include(&AtlasOptions::size, AtlasSizeOptions::Fields());
+  return table;
+}
+
 void AtlasOptions::Validate() const {
   charts.Validate();
   parameterization.Validate();
   packing.Validate();
+  size.Validate();
 }
 
 AtlasQuality MeasureAtlas(const Mesh& mesh, int atlas_size, int gutter_texels) {
@@ -182,9 +193,10 @@ const ParameterizationResult& AtlasBuilder::Parameterize(const ParameterizationO
   return *flat_;
 }
 
-const PackingResult& AtlasBuilder::Pack(const PackingOptions& options, Progress& progress) {
+const PackingResult& AtlasBuilder::Pack(const PackingOptions& options, int size,
+                                        Progress& progress) {
   CAROUSEL_THROW_IF(!flat_, InvalidArgument, "atlas: flatten the charts before packing");
-  packed_ = PackCharts(flat_->uv, flat_->chart_of_face, flat_->charts, options, progress);
+  packed_ = PackCharts(flat_->uv, flat_->chart_of_face, flat_->charts, size, options, progress);
   return *packed_;
 }
 
@@ -207,6 +219,26 @@ void AtlasBuilder::Apply(Mesh* mesh) const {
   mesh->set_has_uvs(true);
 }
 
+const PackingResult& AtlasBuilder::DecideSizeAndPack(const PackingOptions& packing,
+                                                     const AtlasSizeOptions& size,
+                                                     const std::vector<View>& views,
+                                                     const std::vector<int>& front_view, Mesh* mesh,
+                                                     Progress& progress) {
+  size.Validate();
+  const int first = size.size > 0 ? size.size : std::min(kProvisionalAtlasSize, size.max_size);
+  Pack(packing, first, progress);
+  Apply(mesh);
+  if (size.size == 0 && !views.empty()) {
+    const int chosen =
+        ChooseTextureSize(*mesh, views, front_view, size.density_coverage, size.max_size);
+    if (chosen != first) {
+      Pack(packing, chosen, progress);
+      Apply(mesh);
+    }
+  }
+  return *packed_;
+}
+
 AtlasResult BuildAtlas(Mesh* mesh, const AtlasOptions& options, Progress& progress) {
   options.Validate();
   AtlasBuilder builder(*mesh);
@@ -218,11 +250,12 @@ AtlasResult BuildAtlas(Mesh* mesh, const AtlasOptions& options, Progress& progre
   const ParameterizationResult& flat = builder.Parameterize(options.parameterization, progress);
   result.charts_split = flat.charts_split;
   result.seconds_parameterization = flat.seconds;
-  const PackingResult& packed = builder.Pack(options.packing, progress);
+  const PackingResult& packed =
+      builder.DecideSizeAndPack(options.packing, options.size, {}, {}, mesh, progress);
+  result.size = packed.size;
   result.seconds_packing = packed.seconds;
-  builder.Apply(mesh);
   Stopwatch stopwatch;
-  result.quality = MeasureAtlas(*mesh, options.packing.size, options.packing.gutter_texels);
+  result.quality = MeasureAtlas(*mesh, packed.size, options.packing.gutter_texels);
   result.quality.texels_per_metre = packed.texels_per_metre;
   result.seconds_quality = stopwatch.ElapsedSeconds();
   return result;

@@ -578,16 +578,47 @@ std::vector<int> SplitChart(const FaceGraph& graph, const std::vector<int>& face
 
 }  // namespace internal
 
+const OptionTable<ChartOptions>& ChartOptions::Fields() {
+  using O = ChartOptions;
+  static const OptionTable<O> table = [] {
+    OptionTable<O> t;
+    t.Add(&O::seeds, {.name = "seeds", .help = "chart growth seeds (at least)", .min = 1});
+    t.Add(&O::faces_per_seed, {.name = "faces-per-seed",
+                               .help = "... but at least one seed per this many faces",
+                               .unit = "faces",
+                               .min = 100,
+                               .advanced = true});
+    t.Add(&O::max_normal_deviation_deg,
+          {.name = "chart-normal-deviation",
+           .help = "a face joins a chart only if its normal is this close to the chart's",
+           .unit = "deg",
+           .min = 0,
+           .max = 180,
+           .min_exclusive = true,
+           .advanced = true});
+    t.Add(&O::compactness, {.name = "compactness",
+                            .help = "weight of the distance from the seed in chart growth "
+                                    "(round charts pack tightly)",
+                            .min = 0,
+                            .advanced = true});
+    t.Add(&O::max_iterations, {.name = "chart-iterations",
+                               .help = "seed upgrades at most",
+                               .min = 1,
+                               .special = 0,
+                               .special_meaning = "grow once from the initial seeds",
+                               .advanced = true});
+    t.Add(&O::random_seed, {.name = "chart-random-seed",
+                            .help = "random seed of the initial seed choice",
+                            .advanced = true});
+    return t;
+  }();
+  return table;
+}
+
 void ChartOptions::Validate() const {
-  auto check = [](bool ok, const char* field, const char* rule) {
-    if (!ok) throw InvalidArgument(std::string("ChartOptions.") + field + " must be " + rule);
-  };
-  check(seeds >= 1, "seeds", ">= 1");
-  check(faces_per_seed >= 100, "faces_per_seed", ">= 100");
-  check(max_normal_deviation_deg > 0.0 && max_normal_deviation_deg <= 180.0,
-        "max_normal_deviation_deg", "in (0, 180]");
-  check(compactness >= 0.0 && std::isfinite(compactness), "compactness", ">= 0");
-  check(max_iterations >= 0, "max_iterations", ">= 0");
+  Fields().Check(*this);
+  CAROUSEL_THROW_IF(!std::isfinite(compactness), InvalidArgument,
+                    "--compactness must be finite, got " << compactness);
 }
 
 ChartsResult ComputeCharts(const Mesh& mesh, const ChartOptions& options, Progress& progress) {

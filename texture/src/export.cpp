@@ -79,14 +79,34 @@ int AddAccessor(tinygltf::Model* model, int view, int component, std::size_t cou
 
 }  // namespace
 
+const OptionTable<ExportOptions>& ExportOptions::Fields() {
+  using O = ExportOptions;
+  static const OptionTable<O> table = [] {
+    OptionTable<O> t;
+    t.Add(&O::name, {.name = "name", .help = "file stem of the model files (name.obj, name.glb)"});
+    t.Add(&O::glb, {.name = "glb", .help = "a glTF binary (GLB) with the texture embedded too"});
+    t.Add(&O::jpeg_in_glb,
+          {.name = "jpeg-in-glb", .help = "the GLB's texture as JPEG (smaller) instead of PNG"});
+    t.Add(&O::jpeg_quality, {.name = "jpeg-quality",
+                             .help = "JPEG quality of the GLB's texture",
+                             .min = 1,
+                             .max = 100,
+                             .advanced = true});
+    t.Add(&O::png_compression, {.name = "png-compression",
+                                .help = "PNG compression level (higher: smaller, slower)",
+                                .min = 0,
+                                .max = 9,
+                                .advanced = true});
+    return t;
+  }();
+  return table;
+}
+
 void ExportOptions::Validate() const {
+  Fields().Check(*this);
   CAROUSEL_THROW_IF(
       name.empty() || name.find('/') != std::string::npos || name == "." || name == "..",
-      InvalidArgument, "ExportOptions.name must be a plain file stem");
-  CAROUSEL_THROW_IF(jpeg_quality < 1 || jpeg_quality > 100, InvalidArgument,
-                    "ExportOptions.jpeg_quality must be in [1, 100]");
-  CAROUSEL_THROW_IF(png_compression < 0 || png_compression > 9, InvalidArgument,
-                    "ExportOptions.png_compression must be in [0, 9]");
+      InvalidArgument, "--name must be a plain file stem, got '" << name << "'");
 }
 
 ExportResult ExportTexturedModel(const Mesh& mesh, const cv::Mat& texture,

@@ -15,6 +15,7 @@
 
 #include "carousel/core/error.h"
 #include "carousel/core/timer.h"
+#include "carousel/texture/atlas_size.h"
 
 namespace carousel::texture {
 namespace {
@@ -103,9 +104,9 @@ struct Layout {
 // profile dropped onto the atlas's skyline, Tetris-like), trying every pose; false
 // when one does not fit.
 bool TryPack(const std::vector<Placed>& charts, const std::vector<int>& order, double density,
-             const PackingOptions& options, Layout* layout) {
-  const int block = std::max(1, options.size / 512);
-  const int columns = options.size / block;
+             int size, const PackingOptions& options, Layout* layout) {
+  const int block = std::max(1, size / 512);
+  const int columns = size / block;
   std::vector<double> skyline(columns, 0.0);
   layout->origin.assign(charts.size(), Eigen::Vector2d::Zero());
   layout->pose.assign(charts.size(), 0);
@@ -126,12 +127,12 @@ bool TryPack(const std::vector<Placed>& charts, const std::vector<int>& order, d
         double y = 0.0;
         for (int i = 0; i < width; ++i)
           if (profile.bottom[i] != kEmpty) y = std::max(y, skyline[x + i] - profile.bottom[i]);
-        if (y + profile.height > options.size) continue;
+        if (y + profile.height > size) continue;
         // Lowest rest first; then the least space left under the chart.
         double waste = 0.0;
         for (int i = 0; i < width; ++i)
           if (profile.bottom[i] != kEmpty) waste += y + profile.bottom[i] - skyline[x + i];
-        const double score = (y + profile.height) * options.size * 4.0 + waste;
+        const double score = (y + profile.height) * size * 4.0 + waste;
         if (score < best_score) {
           best_score = score;
           best_column = x;
@@ -158,9 +159,9 @@ struct Rect {
 // MaxRects (Jylanki 2010): each chart's box (its gutter included) in the free rectangle that
 // leaves the shortest side over (best short side fit), in either of its two orientations.
 bool TryPackRects(const std::vector<Placed>& charts, const std::vector<int>& order, double density,
-                  const PackingOptions& options, Layout* layout) {
+                  int atlas_size, const PackingOptions& options, Layout* layout) {
   const double margin = 0.5 * options.gutter_texels;
-  const double size = options.size;
+  const double size = atlas_size;
   layout->origin.assign(charts.size(), Eigen::Vector2d::Zero());
   layout->pose.assign(charts.size(), 0);
   std::vector<Rect> free{{0.0, 0.0, size, size}};
@@ -227,45 +228,11 @@ bool TryPackRects(const std::vector<Placed>& charts, const std::vector<int>& ord
   return true;
 }
 
-}  // namespace
-
-PackingMode ParsePackingMode(const std::string& name) {
-  if (name == "obb") return PackingMode::kObb;
-  if (name == "aabb") return PackingMode::kAabb;
-  throw InvalidArgument("unknown packing '" + name + "' (expected obb or aabb)");
-}
-
-const char* PackingModeName(PackingMode mode) { return mode == PackingMode::kObb ? "obb" : "aabb"; }
-
-void PackingOptions::Validate() const {
-  auto check = [](bool ok, const char* field, const char* rule) {
-    if (!ok) throw InvalidArgument(std::string("PackingOptions.") + field + " must be " + rule);
-  };
-  check(size >= 64 && size <= 32768, "size", "in [64, 32768]");
-  check(gutter_texels >= 0 && gutter_texels <= 64, "gutter_texels", "in [0, 64]");
-}
-
-PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
-                         const std::vector<int>& chart_of_face, int charts,
-                         const PackingOptions& options, Progress& progress) {
-  options.Validate();
-  CAROUSEL_THROW_IF(uv.size() != chart_of_face.size() || charts < 1, InvalidArgument,
-                    "packing: " << uv.size() << " faces with UVs, " << chart_of_face.size()
-                                << " chart ids, " << charts << " charts");
-  Stopwatch stopwatch;
-  progress.BeginStage("atlas: packing");
-  PackingResult result;
-  result.uv = uv;
-  std::vector<Placed> placed(charts);
-  for (std::size_t f = 0; f < uv.size(); ++f) {
-    const int c = chart_of_face[f];
-    CAROUSEL_THROW_IF(c < 0 || c >= charts, InvalidArgument,
-                      "packing: chart id " << c << " outside 0.." << charts - 1);
-    placed[c].faces.push_back(static_cast<int>(f));
-  }
-  // Each chart's outline and poses: in OBB mode its minimum-area box in four quarter turns, in
-  // AABB mode as it is.
-  for (Placed& chart : placed) {
+// Each chart's centre, area, outline and poses: in OBB mode its minimum-area box in four
+// quarter turns, in AABB mode as it is.
+void PoseCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv, PackingMode mode,
+                std::vector<Placed>* placed) {
+  for (Placed& chart : *placed) {
     if (chart.faces.empty()) continue;
     for (const int f : chart.faces)
       for (const auto& p : uv[f]) chart.centre += p;
@@ -296,7 +263,7 @@ PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
         outline.push_back({Eigen::Vector2d(key[0], key[1]), Eigen::Vector2d(key[2], key[3])});
     // Turns (radians, the chart turned by -angle): its box's, in four quarter turns.
     std::vector<double> angles = {0.0};
-    if (options.mode == PackingMode::kObb) {
+    if (mode == PackingMode::kObb) {
       const double box = cv::minAreaRect(points).angle * std::numbers::pi / 180.0;
       angles = {box, box + 0.5 * std::numbers::pi, box + std::numbers::pi,
                 box + 1.5 * std::numbers::pi};
@@ -317,6 +284,60 @@ PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
       chart.poses.push_back(std::move(pose));
     }
   }
+}
+
+}  // namespace
+
+PackingMode ParsePackingMode(const std::string& name) {
+  if (name == "obb") return PackingMode::kObb;
+  if (name == "aabb") return PackingMode::kAabb;
+  throw InvalidArgument("unknown packing '" + name + "' (expected obb or aabb)");
+}
+
+const char* PackingModeName(PackingMode mode) { return mode == PackingMode::kObb ? "obb" : "aabb"; }
+
+const OptionTable<PackingOptions>& PackingOptions::Fields() {
+  using O = PackingOptions;
+  static const OptionTable<O> table = [] {
+    OptionTable<O> t;
+    t.AddChoice(&O::mode,
+                {.name = "packing",
+                 .help = "charts packed as their oriented boxes (obb, tighter) or as they lie "
+                         "(aabb, the paper's comparison)"},
+                {{"obb", PackingMode::kObb}, {"aabb", PackingMode::kAabb}});
+    t.Add(&O::gutter_texels, {.name = "gutter",
+                              .help = "empty texels between two charts",
+                              .unit = "texels",
+                              .min = 0,
+                              .max = 64});
+    return t;
+  }();
+  return table;
+}
+
+void PackingOptions::Validate() const { Fields().Check(*this); }
+
+PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
+                         const std::vector<int>& chart_of_face, int charts, int size,
+                         const PackingOptions& options, Progress& progress) {
+  options.Validate();
+  CheckAtlasSize(size);
+  CAROUSEL_THROW_IF(uv.size() != chart_of_face.size() || charts < 1, InvalidArgument,
+                    "packing: " << uv.size() << " faces with UVs, " << chart_of_face.size()
+                                << " chart ids, " << charts << " charts");
+  Stopwatch stopwatch;
+  progress.BeginStage("atlas: packing");
+  PackingResult result;
+  result.size = size;
+  result.uv = uv;
+  std::vector<Placed> placed(charts);
+  for (std::size_t f = 0; f < uv.size(); ++f) {
+    const int c = chart_of_face[f];
+    CAROUSEL_THROW_IF(c < 0 || c >= charts, InvalidArgument,
+                      "packing: chart id " << c << " outside 0.." << charts - 1);
+    placed[c].faces.push_back(static_cast<int>(f));
+  }
+  PoseCharts(uv, options.mode, &placed);
   // Largest boxes first (by height, then width).
   std::vector<int> order(charts);
   std::iota(order.begin(), order.end(), 0);
@@ -346,9 +367,9 @@ PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
   // Whether the charts fit at a density: Tetris-like in the first order (charts interlock), or
   // as boxes in any of the orders.
   auto fits = [&](double density, Layout* layout) {
-    if (TryPack(placed, order, density, options, layout)) return true;
+    if (TryPack(placed, order, density, size, options, layout)) return true;
     for (const auto& o : orders)
-      if (TryPackRects(placed, o, density, options, layout)) return true;
+      if (TryPackRects(placed, o, density, size, options, layout)) return true;
     return false;
   };
   // The largest density that fits: bisection between an area bound and a safe lower bound.
@@ -358,7 +379,7 @@ PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
     total_area += chart.area;
     for (const Pose& pose : chart.poses) longest = std::max(longest, pose.size.maxCoeff());
   }
-  const double usable = options.size - options.gutter_texels;
+  const double usable = size - options.gutter_texels;
   double high = std::min(std::sqrt(usable * usable / std::max(total_area, 1e-30)),
                          usable / std::max(longest, 1e-30));
   double low = 0.0;
@@ -379,7 +400,7 @@ PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
   }
   CAROUSEL_THROW_IF(!(low > 0.0), InvalidArgument,
                     "packing: " << charts << " charts with a " << options.gutter_texels
-                                << "-texel gutter do not fit a " << options.size << " atlas");
+                                << "-texel gutter do not fit a " << size << " atlas");
   result.texels_per_metre = low;
   // Texel positions -> [0, 1] UVs.
   double chart_texels = 0.0;
@@ -393,10 +414,10 @@ PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
             best.origin[c] + (pose.rotation * (p - chart.centre) - pose.lower) * low;
         // The packer's rows count from the bottom: v up, orientation kept (a 90-degree turn
         // is a rotation).
-        p = texel / options.size;
+        p = texel / size;
       }
   }
-  result.utilization = chart_texels / (static_cast<double>(options.size) * options.size);
+  result.utilization = chart_texels / (static_cast<double>(size) * size);
   progress.EndStage();
   result.seconds = stopwatch.ElapsedSeconds();
   return result;

@@ -600,18 +600,56 @@ Flattened Flatten(const FaceGraph& g, const Chart& chart, const std::vector<int>
 
 }  // namespace
 
+const OptionTable<ParameterizationOptions>& ParameterizationOptions::Fields() {
+  using O = ParameterizationOptions;
+  static const OptionTable<O> table = [] {
+    OptionTable<O> t;
+    t.Add(&O::max_abf_iterations, {.name = "abf-iterations",
+                                   .help = "Newton steps of ABF++ at most",
+                                   .min = 1,
+                                   .max = 100,
+                                   .special = 0,
+                                   .special_meaning = "plain LSCM from the 3D angles",
+                                   .advanced = true});
+    t.Add(&O::abf_tolerance, {.name = "abf-tolerance",
+                              .help = "ABF++ stops when every constraint holds to this",
+                              .unit = "rad",
+                              .min = 0,
+                              .min_exclusive = true,
+                              .advanced = true});
+    t.Add(&O::max_split_depth,
+          {.name = "max-split-depth",
+           .help = "a chart that will not flatten validly is split at most this many times over",
+           .min = 0,
+           .max = 64,
+           .advanced = true});
+    t.Add(&O::max_chart_stretch,
+          {.name = "max-chart-stretch",
+           .help = "charts whose L2 stretch exceeds this are split (protrusions keep texels)",
+           .min = 1,
+           .advanced = true});
+    t.Add(&O::rectify_max_stretch,
+          {.name = "rectify-stretch",
+           .help = "charts pulled towards rectangles (tighter packing) while their L2 stretch "
+                   "stays under this; 1 = angle-preserving flattening only",
+           .min = 1,
+           .advanced = true});
+    return t;
+  }();
+  return table;
+}
+
 void ParameterizationOptions::Validate() const {
-  auto check = [](bool ok, const char* field, const char* rule) {
-    if (!ok)
-      throw InvalidArgument(std::string("ParameterizationOptions.") + field + " must be " + rule);
+  Fields().Check(*this);
+  auto finite = [](double value, const char* name) {
+    CAROUSEL_THROW_IF(!std::isfinite(value), InvalidArgument,
+                      "--" << name << " must be finite, got " << value);
   };
-  check(max_abf_iterations >= 0 && max_abf_iterations <= 100, "max_abf_iterations", "in [0, 100]");
-  check(abf_tolerance > 0.0 && std::isfinite(abf_tolerance), "abf_tolerance", "> 0");
-  check(max_split_depth >= 0 && max_split_depth <= 64, "max_split_depth", "in [0, 64]");
-  check(max_chart_stretch >= 1.0 && std::isfinite(max_chart_stretch), "max_chart_stretch", ">= 1");
-  check(rectify_max_stretch >= 1.0 && std::isfinite(rectify_max_stretch), "rectify_max_stretch",
-        ">= 1");
-  check(threads >= 0, "threads", ">= 0");
+  finite(abf_tolerance, "abf-tolerance");
+  finite(max_chart_stretch, "max-chart-stretch");
+  finite(rectify_max_stretch, "rectify-stretch");
+  CAROUSEL_THROW_IF(threads < 0, InvalidArgument,
+                    "ParameterizationOptions.threads must be >= 0, got " << threads);
 }
 
 ParameterizationResult ParameterizeCharts(const Mesh& mesh, const std::vector<int>& chart_of_face,

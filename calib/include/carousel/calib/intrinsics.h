@@ -18,6 +18,7 @@
 
 #include "carousel/calib/board.h"
 #include "carousel/core/camera_model.h"
+#include "carousel/core/options.h"
 #include "carousel/core/progress.h"
 
 namespace carousel::calib {
@@ -33,6 +34,8 @@ struct IntrinsicsOptions {
   // repeated without it (a moved board, a wrong corner order). outlier_factor <= 0: never.
   double outlier_factor = 4.0;
   double outlier_floor_px = 0.5;
+  // The description of the fields a person sets (core/options.h).
+  static const OptionTable<IntrinsicsOptions>& Fields();
   void Validate() const;
 };
 

@@ -28,6 +28,7 @@
 
 #include "carousel/calib/board.h"
 #include "carousel/core/camera_model.h"
+#include "carousel/core/options.h"
 #include "carousel/core/progress.h"
 
 namespace carousel::calib {
@@ -108,6 +109,8 @@ struct RigCalibrationOptions {
   double max_angle_error_deg = 0.5;
   double max_rms_px = 1.0;
   int threads = 0;  // 0 = one per hardware thread
+  // The description of the fields a person sets (core/options.h).
+  static const OptionTable<RigCalibrationOptions>& Fields();
   void Validate() const;
 };
 

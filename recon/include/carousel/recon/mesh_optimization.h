@@ -20,6 +20,7 @@
 #include <cstddef>
 
 #include "carousel/core/mesh.h"
+#include "carousel/core/options.h"
 #include "carousel/core/progress.h"
 
 namespace carousel::recon {
@@ -42,6 +43,8 @@ struct MeshOptimizationOptions {
   // Volume the result is offset to, m^3; 0 = the input's volume. (The visual hull's, when the
   // input is its coarser proxy.)
   double target_volume_m3 = 0.0;
+  // The description of every field above (core/options.h): flags, widgets, range checks.
+  static const OptionTable<MeshOptimizationOptions>& Fields();
   void Validate() const;
 };
 

@@ -30,6 +30,7 @@
 #include <opencv2/core.hpp>
 
 #include "carousel/core/camera_model.h"
+#include "carousel/core/options.h"
 #include "carousel/core/progress.h"
 #include "carousel/core/view.h"
 
@@ -70,6 +71,8 @@ struct SilhouetteOptions {
   double max_hole_fraction = 0.0005;
   // Worker threads for several views; 0 = one per hardware thread.
   int threads = 0;
+  // The description of every field above (core/options.h): flags, widgets, range checks.
+  static const OptionTable<SilhouetteOptions>& Fields();
   void Validate() const;
 };
 

@@ -23,6 +23,7 @@
 #include <Eigen/Geometry>
 
 #include "carousel/core/mesh.h"
+#include "carousel/core/options.h"
 #include "carousel/core/progress.h"
 #include "carousel/core/view.h"
 
@@ -55,6 +56,8 @@ struct VisualHullOptions {
   std::size_t proxy_max_faces = 250'000;
   // Worker threads; 0 = one per hardware thread.
   int threads = 0;
+  // The description of every field above (core/options.h): flags, widgets, range checks.
+  static const OptionTable<VisualHullOptions>& Fields();
   void Validate() const;
 };
 

@@ -17,6 +17,7 @@
 #include <nlohmann/json_fwd.hpp>
 
 #include "carousel/calib/rig_calibration.h"
+#include "carousel/core/options.h"
 #include "carousel/core/progress.h"
 
 namespace carousel::studio {
@@ -33,6 +34,8 @@ struct CalibrationPlan {
   // Height of the first placement's board origin above the plate's top surface, metres;
   // < 0: not known yet (the simulated rig knows it; a real rig needs it measured).
   double board_origin_height_m = -1.0;
+  // The description of the fields a person sets (core/options.h).
+  static const OptionTable<CalibrationPlan>& Fields();
   void Validate() const;
 };
 

@@ -44,10 +44,16 @@ struct ProcessResult {
 // session file at fault, InvalidArgument, Cancelled).
 ProcessResult ProcessSession(const std::filesystem::path& session_folder,
                              const ProcessOptions& options, Progress& progress);
+// The same on a session already read (one run reads session.json once); `session` is kept
+// up to date with what the stages record.
+ProcessResult ProcessSession(const std::filesystem::path& session_folder, Session& session,
+                             const ProcessOptions& options, Progress& progress);
 
 // The fingerprints ProcessSession compares (lowercase hex SHA-256). \throw IoError/FormatError.
 std::string ReconstructFingerprint(const std::filesystem::path& session_folder,
                                    const ReconstructOptions& options);
+std::string ReconstructFingerprint(const std::filesystem::path& session_folder,
+                                   const Session& session, const ReconstructOptions& options);
 std::string TextureFingerprint(const std::filesystem::path& session_folder,
                                const std::string& reconstruct_fingerprint,
                                const TextureSessionOptions& options);

@@ -14,8 +14,10 @@
 #include <string>
 #include <vector>
 
+#include "carousel/core/options.h"
 #include "carousel/core/progress.h"
 #include "carousel/recon/recon.h"
+#include "carousel/studio/session.h"
 
 namespace carousel::studio {
 
@@ -23,6 +25,8 @@ struct ReconstructOptions {
   recon::SilhouetteOptions silhouettes;
   recon::VisualHullOptions hull;
   recon::MeshOptimizationOptions mesh;
+  // The silhouette, hull and mesh tables together (flag names are unique across them).
+  static const OptionTable<ReconstructOptions>& Fields();
   void Validate() const;
 };
 
@@ -43,5 +47,10 @@ struct ReconstructResult {
 // \throw IoError/FormatError naming the session file at fault, InvalidArgument, Cancelled.
 ReconstructResult ReconstructSession(const std::filesystem::path& session_folder,
                                      const ReconstructOptions& options, Progress& progress);
+// The same on a session already read (one run reads session.json once): `session` is updated
+// (masks, stage) and written back.
+ReconstructResult ReconstructSession(const std::filesystem::path& session_folder,
+                                     Session& session, const ReconstructOptions& options,
+                                     Progress& progress);
 
 }  // namespace carousel::studio

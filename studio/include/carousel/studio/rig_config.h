@@ -24,16 +24,12 @@
 #pragma once
 
 #include <filesystem>
-#include <functional>
 #include <map>
-#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "carousel/core/camera_model.h"
-#include "carousel/rig/camera.h"
-#include "carousel/rig/turntable.h"
 
 namespace carousel::studio {
 
@@ -88,22 +84,5 @@ void WriteRigConfig(const std::filesystem::path& path, const RigConfig& config);
 std::string RigConfigToJsonText(const RigConfig& config);
 RigConfig RigConfigFromJsonText(const std::string& text, const std::filesystem::path& source);
 
-// The devices a session captures with, whatever their backend.
-struct RigBackends {
-  std::shared_ptr<rig::Turntable> turntable;
-  std::vector<std::unique_ptr<rig::Camera>> cameras;
-  std::vector<CameraModel> cam_from_table;  // per camera: cam_from_world at table angle 0
-  CapturePlan plan;
-  // With plan.shutter == "controller": pulses the shutter outputs of these cameras at once.
-  std::function<void(const std::vector<int>& cameras)> release;
-  // Calibration sessions: puts the board in placement `index` (the simulated rig moves its
-  // board; hardware asks the operator).
-  std::function<void(int index)> place_board;
-};
-
-// Opens the turntable controller (serial) and the cameras (libgphoto2), checks the serial
-// numbers, applies the controller gear and the camera settings. \throw DeviceError naming the
-// device that is missing or wrong, before anything is captured.
-RigBackends OpenHardwareRig(const RigConfig& config);
 
 }  // namespace carousel::studio

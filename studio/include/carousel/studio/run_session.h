@@ -1,18 +1,14 @@
-// `carousel run`: the one-button session. Capture (turntable stops x cameras, through the
-// rig::Turntable and rig::Camera backends), then reconstruct, texture and export, into
-// <out>/<product>/ (DESIGN.md's session folder). Crash-safe and resumable:
+// `carousel run`: the one-button session. Capture (capture.h: turntable stops x cameras, on the
+// rig that rig_factory.h opens), then reconstruct, texture and export, into <out>/<product>/
+// (DESIGN.md's session folder). Crash-safe and resumable:
 //   - run.json (written first, atomically) records how to rebuild the rig and the plan;
-//   - each photo is downloaded atomically under its planned name (cam<C>_stop<SS>.jpg), then
-//     its SHA-256 goes into session.json, which is rewritten atomically only after the photo
-//     is on disk;
+//   - photos are recorded in session.json only once on disk (capture.h);
 //   - `carousel run --resume SESSION` keeps every photo whose checksum matches, adopts a
-//     complete photo that was on disk but not yet recorded (a kill between download and
-//     manifest), moves a damaged one aside (damaged/<name>.N, never deleted) and retakes it,
-//     removes stale temporary files, and runs each stage whose outputs are not current.
+//     complete photo that was on disk but not yet recorded, moves a damaged one aside and
+//     retakes it, removes stale temporary files, and runs each stage whose outputs are not
+//     current.
 // Backends: the simulated rig (a product model on the simulated turntable), or the hardware of
-// a rig file (the serial turntable controller and libgphoto2 cameras; rig_config.h). Each stop:
-// move, settle, every camera fires at once, then the table turns to the next stop while the
-// photos download.
+// a rig file (the serial turntable controller and libgphoto2 cameras; rig_config.h).
 #pragma once
 
 #include <filesystem>

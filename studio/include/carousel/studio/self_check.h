@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "carousel/core/progress.h"
+#include "carousel/core/options.h"
 
 namespace carousel::studio {
 
@@ -19,6 +20,8 @@ struct SelfCheckOptions {
   std::filesystem::path data_dir;
   // Random points per camera-model check (>= 1).
   int points = 2000;
+  // The description of the fields a person sets (core/options.h).
+  static const OptionTable<SelfCheckOptions>& Fields();
   void Validate() const;
 };
 

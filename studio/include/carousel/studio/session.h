@@ -19,9 +19,10 @@
 #include <string>
 #include <vector>
 
-#include <nlohmann/json_fwd.hpp>
-
 #include "carousel/core/camera_model.h"
+// The camera as session.json stores it: CameraModelToJson/FromJson (core/json.h). Included
+// here until tests/studio/hardware_run_test.cpp includes core/json.h itself.
+#include "carousel/core/json.h"
 #include "carousel/core/view.h"
 
 namespace carousel::studio {
@@ -75,12 +76,6 @@ std::vector<View> SessionViews(const std::filesystem::path& folder, const Sessio
 
 // The file stem of the photo camera `camera` takes at turntable stop `stop`: "cam0_stop03".
 std::string ViewStem(int camera, int stop);
-
-// A camera model as session.json stores it (intrinsics, distortion, cam_from_world), and back.
-// \throw FormatError naming `file` and the field under `where` when malformed.
-nlohmann::json CameraModelToJson(const CameraModel& camera);
-CameraModel CameraModelFromJson(const nlohmann::json& value, const std::filesystem::path& file,
-                                const std::string& where);
 
 // The current UTC time as ISO 8601 ("2026-11-22T01:44:27Z").
 std::string NowUtc();

@@ -8,13 +8,28 @@
 
 #include <filesystem>
 #include <string>
+#include <vector>
 
+#include <Eigen/Core>
+
+#include "carousel/core/options.h"
 #include "carousel/core/progress.h"
 #include "carousel/sim/renderer.h"
 #include "carousel/sim/scene.h"
 #include "carousel/sim/sim_rig.h"
 
 namespace carousel::studio {
+
+// The simulated capture's fields that a one-button session records in its run.json (so a
+// resume photographs the same scene the same way): what `carousel run --sim` offers.
+inline const std::vector<std::string> kRunSimFields = {
+    "scene", "data",  "views", "size",          "elevations", "focal-mm", "distance",
+    "noise", "seed",  "jpeg-quality", "target-height", "scale",      "yaw-deg"};
+
+// "5184x3456" -> width, height. \throw InvalidArgument naming `flag`.
+void ParseImageSize(const std::string& text, const std::string& flag, int* width, int* height);
+// "white", "grey", "green", "black" or "#rrggbb" -> sRGB 0..1 (RGB). \throw InvalidArgument.
+Eigen::Vector3d ParseBackdropColour(const std::string& text, const std::string& flag);
 
 struct SimCaptureOptions {
   // A model name (shoe, bottle, avocado, duck: the glTF models in the shared data) or a path to
@@ -37,6 +52,9 @@ struct SimCaptureOptions {
   std::string product;
   // Replace an existing session folder (after the new one is complete).
   bool overwrite = false;
+  // Every field a person sets (core/options.h); `run` offers the ones its run.json keeps
+  // (kRunSimFields).
+  static const OptionTable<SimCaptureOptions>& Fields();
   void Validate() const;
 };
 

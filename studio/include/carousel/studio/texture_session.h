@@ -12,35 +12,32 @@
 #include <filesystem>
 #include <vector>
 
+#include "carousel/core/options.h"
 #include "carousel/core/progress.h"
 #include "carousel/texture/atlas.h"
 #include "carousel/texture/export.h"
+#include "carousel/texture/held_out.h"
 #include "carousel/texture/texture_map.h"
 
 namespace carousel::studio {
 
 struct TextureSessionOptions {
+  // atlas.size: the atlas side (--size, 0 = automatic, the default; --max-size;
+  // --density-coverage), decided once by texture::AtlasBuilder::DecideSizeAndPack.
   texture::AtlasOptions atlas;
   texture::GroupingOptions grouping;
+  // transfer.correction is not read: the grouping's (--correction) is used for both.
   texture::TransferOptions transfer;
   texture::ExportOptions output;
-  // Atlas side in texels; 0 = chosen so that `density_coverage` of the faces get at least as
-  // many texels as their front-photo pixels (capped at max_size).
-  int size = 0;
-  int max_size = 8192;
-  double density_coverage = 0.95;
+  // The tables of the four parts together (core/options.h); every name unique.
+  static const OptionTable<TextureSessionOptions>& Fields();
   void Validate() const;
 };
 
 // The textured model rendered (unlit, from model.glb) through a held-out view's camera and
 // compared with its photo over the object's mask (the session's ground-truth mask when it has
-// one, else its silhouette).
-struct HeldOutScore {
-  int view = 0;
-  double psnr_db = 0.0;
-  double ssim = 0.0;            // mean of the per-channel SSIM map over the mask
-  double mask_agreement = 0.0;  // IoU of the rendered and the reference silhouettes
-};
+// one, else its silhouette): texture/held_out.h.
+using HeldOutScore = texture::HeldOutScore;
 
 struct TextureSessionResult {
   int views = 0;

@@ -1,7 +1,8 @@
 // The texture atlas (texture paper, sections 1-3): charts (charts.h), flattening
-// (parameterization.h) and packing (packing.h) in one call, or staged with AtlasBuilder;
-// writes Mesh::chart_id per face and per-halfedge UVs in [0, 1] (v up, OBJ convention).
-// MeasureAtlas computes the figures of merit and the validity checks the tests assert.
+// (parameterization.h) and packing (packing.h) at the side decided once (atlas_size.h) in one
+// call, or staged with AtlasBuilder; writes Mesh::chart_id per face and per-halfedge UVs in
+// [0, 1] (v up, OBJ convention). MeasureAtlas computes the figures of merit and the validity
+// checks the tests assert.
 #pragma once
 
 #include <cstddef>
@@ -11,7 +12,10 @@
 #include <opencv2/core.hpp>
 
 #include "carousel/core/mesh.h"
+#include "carousel/core/options.h"
 #include "carousel/core/progress.h"
+#include "carousel/core/view.h"
+#include "carousel/texture/atlas_size.h"
 #include "carousel/texture/charts.h"
 #include "carousel/texture/packing.h"
 #include "carousel/texture/parameterization.h"
@@ -22,6 +26,9 @@ struct AtlasOptions {
   ChartOptions charts;
   ParameterizationOptions parameterization;
   PackingOptions packing;
+  AtlasSizeOptions size;  // the atlas side (AtlasBuilder::DecideSizeAndPack)
+  // The tables of the four parts together (core/options.h); every name unique.
+  static const OptionTable<AtlasOptions>& Fields();
   void Validate() const;
 };
 
@@ -57,6 +64,7 @@ struct AtlasQuality {
 AtlasQuality MeasureAtlas(const Mesh& mesh, int atlas_size, int gutter_texels);
 
 struct AtlasResult {
+  int size = 0;  // the atlas side decided, texels
   AtlasQuality quality;
   int seeds_grown_into = 0;  // charts after growth, before splits
   int charts_split = 0;      // charts split because they did not flatten one-to-one
@@ -75,9 +83,22 @@ class AtlasBuilder {
   const ChartsResult& ComputeCharts(const ChartOptions& options, Progress& progress);
   const ParameterizationResult& Parameterize(const ParameterizationOptions& options,
                                              Progress& progress);
-  const PackingResult& Pack(const PackingOptions& options, Progress& progress);
+  // Packs at side `size`, kMinAtlasSize..kMaxAtlasSize.
+  const PackingResult& Pack(const PackingOptions& options, int size, Progress& progress);
   // Writes chart ids and UVs into `mesh` (the same connectivity as the builder's).
   void Apply(Mesh* mesh) const;
+  // The one place the atlas side is decided: packs at the side `size` gives and writes the
+  // atlas into `mesh` (Apply); the result's `size` is the side. A set side is used as it is.
+  // Automatic, with `views` and each face's front view among them (GroupFaces): packed
+  // provisionally at min(kProvisionalAtlasSize, max_size) and written into `mesh`, the side
+  // chosen on that atlas by ChooseTextureSize, packed again at it when it differs. Automatic
+  // without views (`views` empty): min(kProvisionalAtlasSize, max_size).
+  // \throw as Pack, Apply, ChooseTextureSize; InvalidArgument (size options).
+  const PackingResult& DecideSizeAndPack(const PackingOptions& packing,
+                                         const AtlasSizeOptions& size,
+                                         const std::vector<View>& views,
+                                         const std::vector<int>& front_view, Mesh* mesh,
+                                         Progress& progress);
 
  private:
   const Mesh& mesh_;
@@ -86,7 +107,8 @@ class AtlasBuilder {
   std::optional<PackingResult> packed_;
 };
 
-// Charts, flattening and packing of `mesh`, written into it; quality measured.
+// Charts, flattening and packing of `mesh` at the side options.size gives (without photos: a
+// set side, or min(kProvisionalAtlasSize, max_size)), written into it; quality measured.
 // \throw as AtlasBuilder, the stages and MeasureAtlas; Cancelled.
 AtlasResult BuildAtlas(Mesh* mesh, const AtlasOptions& options, Progress& progress);
 

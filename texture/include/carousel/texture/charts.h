@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "carousel/core/mesh.h"
+#include "carousel/core/options.h"
 #include "carousel/core/progress.h"
 
 namespace carousel::texture {
@@ -44,6 +45,8 @@ struct ChartOptions {
   int max_iterations = 8;
   // Random seed of the initial seed choice (deterministic results).
   std::uint64_t random_seed = 1;
+  // The description of every field above (core/options.h): flags, widgets, range checks.
+  static const OptionTable<ChartOptions>& Fields();
   void Validate() const;
 };
 

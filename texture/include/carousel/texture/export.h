@@ -11,6 +11,7 @@
 #include <opencv2/core.hpp>
 
 #include "carousel/core/mesh.h"
+#include "carousel/core/options.h"
 
 namespace carousel::texture {
 
@@ -20,6 +21,8 @@ struct ExportOptions {
   bool jpeg_in_glb = false;  // the GLB's texture as JPEG (smaller) instead of PNG
   int jpeg_quality = 92;     // 1..100
   int png_compression = 3;   // 0..9
+  // The description of every field above (core/options.h): flags, widgets, range checks.
+  static const OptionTable<ExportOptions>& Fields();
   void Validate() const;
 };
 

@@ -24,6 +24,7 @@
 
 #include <Eigen/Core>
 
+#include "carousel/core/options.h"
 #include "carousel/core/progress.h"
 
 namespace carousel::texture {
@@ -33,27 +34,31 @@ enum class PackingMode { kObb, kAabb };
 PackingMode ParsePackingMode(const std::string& name);
 const char* PackingModeName(PackingMode mode);
 
+// The atlas side is not an option of the packer's: it is decided once (atlas_size.h) and
+// passed in.
 struct PackingOptions {
   PackingMode mode = PackingMode::kObb;
-  // Atlas width and height in texels, 64..32768.
-  int size = 4096;
   // Empty texels between two charts (and between a chart and the atlas border, half of it),
   // 0..64. 8 keeps bilinear filtering clean down to the third mip level (1/4 size).
   int gutter_texels = 8;
+  // The description of every field above (core/options.h): flags, widgets, range checks.
+  static const OptionTable<PackingOptions>& Fields();
   void Validate() const;
 };
 
 struct PackingResult {
+  int size = 0;                                    // the atlas side packed into, texels
   std::vector<std::array<Eigen::Vector2d, 3>> uv;  // per face, per corner, in [0, 1], v up
   double texels_per_metre = 0.0;                   // the common density
   double utilization = 0.0;                        // chart area / atlas area
   double seconds = 0.0;
 };
 
-// `uv`: per face, per corner, flattened positions in metres; `chart_of_face`: 0 .. charts - 1.
+// `uv`: per face, per corner, flattened positions in metres; `chart_of_face`: 0 .. charts - 1;
+// `size`: the atlas side, texels, kMinAtlasSize..kMaxAtlasSize (atlas_size.h).
 // \throw InvalidArgument (options, sizes), Cancelled.
 PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
-                         const std::vector<int>& chart_of_face, int charts,
+                         const std::vector<int>& chart_of_face, int charts, int size,
                          const PackingOptions& options, Progress& progress);
 
 }  // namespace carousel::texture

@@ -39,6 +39,7 @@
 #include <Eigen/Core>
 
 #include "carousel/core/mesh.h"
+#include "carousel/core/options.h"
 #include "carousel/core/progress.h"
 
 namespace carousel::texture {
@@ -58,6 +59,9 @@ struct ParameterizationOptions {
   double rectify_max_stretch = 1.04;
   // Worker threads; 0 = one per hardware thread.
   int threads = 0;
+  // The description of every field above but `threads` (core/options.h): flags, widgets,
+  // range checks.
+  static const OptionTable<ParameterizationOptions>& Fields();
   void Validate() const;
 };
 

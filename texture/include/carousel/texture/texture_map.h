@@ -18,7 +18,8 @@
 // view sees get the colour of their neighbours and are counted.
 //
 // Texel coordinates: atlas texel (x, y) has its centre at UV ((x + 0.5) / size,
-// 1 - (y + 0.5) / size) (v up, row 0 at the top of the image).
+// 1 - (y + 0.5) / size) (v up, row 0 at the top of the image); `size` is the atlas's side,
+// decided once with the atlas (atlas_size.h).
 #pragma once
 
 #include <vector>
@@ -26,8 +27,10 @@
 #include <opencv2/core.hpp>
 
 #include "carousel/core/mesh.h"
+#include "carousel/core/options.h"
 #include "carousel/core/progress.h"
 #include "carousel/core/view.h"
+#include "carousel/texture/atlas_size.h"
 
 namespace carousel::texture {
 
@@ -40,6 +43,8 @@ struct GroupingOptions {
   int max_island_faces = 8;
   // Longest side of the per-view z-buffers, pixels (the photo is scaled down to it), 64..8192.
   int zbuffer_max_side = 1600;
+  // The description of every field above (core/options.h): flags, widgets, range checks.
+  static const OptionTable<GroupingOptions>& Fields();
   void Validate() const;
 };
 
@@ -63,24 +68,22 @@ struct GroupingResult {
 GroupingResult GroupFaces(const Mesh& mesh, const std::vector<View>& views,
                           const GroupingOptions& options, Progress& progress);
 
-// The atlas size at which at least `coverage` of the faces get as many texels as they cover
-// pixels in their front photo (the paper's rule), rounded up to a multiple of 512 and clamped
-// to [512, max_size]. `mesh` must have UVs. \throw InvalidArgument (no UVs, sizes).
-int ChooseTextureSize(const Mesh& mesh, const std::vector<View>& views,
-                      const std::vector<int>& front_view, double coverage, int max_size);
-
+// The atlas side is the atlas's (atlas_size.h), passed to TransferTexture.
 struct TransferOptions {
-  int size = 4096;  // atlas side, texels, 64..16384
   // Seam blending by the paper's Eq. 8.
   bool blend = true;
   // Per-view colour gains.
   bool gain = true;
   // Per-texel correction: a texel whose point falls on the front photo's background (mask)
   // is taken from another view that sees the face with the point on the object, or, when
-  // none does, filled from the surrounding texels. Needs the views' masks.
+  // none does, filled from the surrounding texels. Needs the views' masks. The same switch as
+  // GroupingOptions::correction (--correction), which the texture session copies here; not
+  // described in Fields() for that reason.
   bool correction = true;
   // Texels the charts are grown by into the gutter (0..64).
   int dilation_texels = 8;
+  // The description of every field above but `correction` (core/options.h).
+  static const OptionTable<TransferOptions>& Fields();
   void Validate() const;
 };
 
@@ -98,10 +101,12 @@ struct TextureMap {
   double seconds = 0.0;
 };
 
-// `mesh` must have UVs and chart ids (BuildAtlas); `grouping` from GroupFaces on it.
+// `mesh` must have UVs and chart ids (BuildAtlas); `grouping` from GroupFaces on it;
+// `atlas_size` the side the atlas was packed at (PackingResult::size, AtlasResult::size),
+// kMinAtlasSize..kMaxAtlasSize.
 // \throw InvalidArgument (no UVs, sizes), IoError/FormatError naming a photo, Cancelled.
 TextureMap TransferTexture(const Mesh& mesh, const std::vector<View>& views,
-                           const GroupingResult& grouping, const TransferOptions& options,
-                           Progress& progress);
+                           const GroupingResult& grouping, int atlas_size,
+                           const TransferOptions& options, Progress& progress);
 
 }  // namespace carousel::texture

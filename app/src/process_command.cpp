@@ -1,0 +1,85 @@
+// carousel reconstruct SESSION, carousel process SESSION...: the processing stages.
+#include <memory>
+
+#include "carousel/studio/pipeline.h"
+#include "carousel/studio/reconstruct.h"
+#include "command.h"
+#include "print.h"
+
+namespace carousel::app {
+namespace {
+
+struct ReconstructArgs {
+  studio::ReconstructOptions options;
+  std::filesystem::path session;
+};
+
+struct ProcessArgs {
+  std::vector<std::filesystem::path> sessions;
+  studio::ProcessOptions options;
+};
+
+// Every session in turn; a failing one is reported and the batch goes on. The exit code is
+// the first failure's (0 when every session is processed).
+int RunProcess(const ProcessArgs& args, Io& io) {
+  int status = kExitOk;
+  int failed = 0;
+  for (const std::filesystem::path& session : args.sessions) {
+    io.out << "session " << session.string() << "\n";
+    try {
+      CliProgress cli(io.err);
+      const studio::ProcessResult result =
+          studio::ProcessSession(session, args.options, cli.progress());
+      if (result.reconstruct) {
+        PrintReconstruct(session, *result.reconstruct, io.out);
+      } else {
+        io.out << "reconstruct: current, skipped\n";
+      }
+      if (result.texture) {
+        PrintTexture(session, *result.texture, io.out);
+      } else {
+        io.out << "texture: current, skipped\n";
+      }
+    } catch (const std::exception& e) {
+      io.err << "carousel process: " << session.string() << ": error: " << e.what() << '\n';
+      if (status == kExitOk) status = ExitCodeFor(e);
+      ++failed;
+      if (dynamic_cast<const Cancelled*>(&e)) break;
+    }
+  }
+  if (args.sessions.size() > 1) {
+    io.out << args.sessions.size() - static_cast<std::size_t>(failed) << " of "
+           << args.sessions.size() << " sessions processed";
+    if (failed > 0) io.out << ", " << failed << " failed";
+    io.out << "\n";
+  }
+  return status;
+}
+
+}  // namespace
+
+void AddReconstructCommand(CLI::App& command, Dispatch& dispatch) {
+  auto args = std::make_shared<ReconstructArgs>();
+  command.add_option("session", args->session, "session folder")->required();
+  AddOptionFlags(&command, args->options, studio::ReconstructOptions::Fields());
+  dispatch.On(&command, [args](Io& io) {
+    CliProgress cli(io.err);
+    PrintReconstruct(args->session,
+                     studio::ReconstructSession(args->session, args->options, cli.progress()),
+                     io.out);
+    return kExitOk;
+  });
+}
+
+void AddProcessCommand(CLI::App& command, Dispatch& dispatch) {
+  auto args = std::make_shared<ProcessArgs>();
+  command.add_option("sessions", args->sessions, "session folders")->required();
+  command.add_flag("--force", args->options.force, "run every stage, current or not");
+  AddOptionFlags(&command, args->options.reconstruct,
+                 studio::ReconstructOptions::Fields().Only({"faces"}));
+  AddOptionFlags(&command, args->options.texture,
+                 studio::TextureSessionOptions::Fields().Only({"exclude-views"}));
+  dispatch.On(&command, [args](Io& io) { return RunProcess(*args, io); });
+}
+
+}  // namespace carousel::app

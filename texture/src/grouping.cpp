@@ -1,0 +1,279 @@
+// GroupFaces (texture_map.h): each face's front image among the photos.
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <limits>
+#include <map>
+
+#include "carousel/core/error.h"
+#include "carousel/core/parallel.h"
+#include "carousel/core/raster.h"
+#include "carousel/core/timer.h"
+#include "carousel/texture/texture_map.h"
+#include "texture_map_steps.h"
+
+namespace carousel::texture {
+namespace {
+
+using internal::At;
+using internal::FaceData;
+using internal::kSamples;
+
+// Per-view depth buffer of the mesh (camera-frame z, metres), at a reduced resolution.
+class DepthBuffer {
+ public:
+  DepthBuffer(const std::vector<FaceData>& faces, const CameraModel& camera, int max_side)
+      : camera_(camera.Scaled(
+            std::min(1.0, static_cast<double>(max_side) / std::max(camera.width, camera.height)))),
+        depth_(camera_.height, camera_.width, CV_32F,
+               cv::Scalar(std::numeric_limits<float>::max())) {
+    for (const FaceData& f : faces) {
+      std::array<Eigen::Vector2d, 3> px;
+      std::array<double, 3> z;
+      bool ok = true;
+      for (int i = 0; i < 3; ++i) {
+        const Eigen::Vector3d c = camera_.cam_from_world * f.p[i];
+        if (c.z() <= 1e-6) {
+          ok = false;
+          break;
+        }
+        px[i] = camera_.ProjectFromCam(c);
+        z[i] = c.z();
+      }
+      if (!ok) continue;
+      const double area =
+          (px[1] - px[0]).x() * (px[2] - px[0]).y() - (px[1] - px[0]).y() * (px[2] - px[0]).x();
+      if (std::abs(area) < 1e-12) continue;
+      ForEachPixelCentreIn(px, depth_.cols, depth_.rows, [&](int x, int y) {
+        const Eigen::Vector2d q(x, y);
+        const double b1 =
+            ((q - px[0]).x() * (px[2] - px[0]).y() - (q - px[0]).y() * (px[2] - px[0]).x()) / area;
+        const double b2 =
+            ((px[1] - px[0]).x() * (q - px[0]).y() - (px[1] - px[0]).y() * (q - px[0]).x()) / area;
+        const double b0 = 1.0 - b1 - b2;
+        // Perspective-correct: 1/z is linear in the image.
+        const double inv = b0 / z[0] + b1 / z[1] + b2 / z[2];
+        if (inv <= 0.0) return;
+        float& d = depth_.at<float>(y, x);
+        d = std::min(d, static_cast<float>(1.0 / inv));
+      });
+    }
+  }
+
+  // Whether the surface point is the nearest thing the camera sees along its ray.
+  bool Visible(const Eigen::Vector3d& point_world) const {
+    const Eigen::Vector3d c = camera_.cam_from_world * point_world;
+    if (c.z() <= 1e-6) return false;
+    const Eigen::Vector2d px = camera_.ProjectFromCam(c);
+    const int x = static_cast<int>(std::lround(px.x()));
+    const int y = static_cast<int>(std::lround(px.y()));
+    if (x < 0 || y < 0 || x >= depth_.cols || y >= depth_.rows) return false;
+    // The nearest depth around the pixel: a point on a face edge may round onto a pixel its
+    // own face does not cover.
+    float nearest = depth_.at<float>(y, x);
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dx = -1; dx <= 1; ++dx) {
+        const int xx = x + dx, yy = y + dy;
+        if (xx >= 0 && yy >= 0 && xx < depth_.cols && yy < depth_.rows)
+          nearest = std::min(nearest, depth_.at<float>(yy, xx));
+      }
+    const double tolerance = 0.003 + 0.004 * c.z();
+    return c.z() <= nearest + tolerance || nearest == std::numeric_limits<float>::max();
+  }
+
+ private:
+  CameraModel camera_;
+  cv::Mat depth_;
+};
+
+// Per face and view (face * views + view): the cosine of the viewing angle (<= 0: not a
+// candidate), all samples visible, at least half of them visible, all samples on the mask.
+struct ViewMeasures {
+  std::vector<float> cosine;
+  std::vector<unsigned char> visible, partly, on_mask;
+};
+
+ViewMeasures MeasureViews(const std::vector<FaceData>& faces, const std::vector<View>& views,
+                          const std::vector<unsigned char>& excluded,
+                          const GroupingOptions& options, Progress& progress) {
+  const std::size_t nf = faces.size();
+  const int nv = static_cast<int>(views.size());
+  ViewMeasures m;
+  m.cosine.assign(nf * nv, 0.0f);
+  m.visible.assign(nf * nv, 0);
+  m.partly.assign(nf * nv, 0);
+  m.on_mask.assign(nf * nv, 1);
+  std::atomic<int> done{0};
+  ParallelFor(views.size(), 1, 0, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t v = begin; v < end; ++v) {
+      if (excluded[v]) continue;
+      const CameraModel& camera = views[v].camera();
+      const DepthBuffer depth(faces, camera, options.zbuffer_max_side);
+      const cv::Mat mask = options.correction ? views[v].Mask() : cv::Mat();
+      const Eigen::Vector3d centre = camera.Centre();
+      for (std::size_t f = 0; f < nf; ++f) {
+        const FaceData& face = faces[f];
+        const Eigen::Vector3d middle = At(face, kSamples[0]);
+        const double c = face.normal.dot((centre - middle).normalized());
+        if (c <= 0.0) continue;
+        int seen = 0, inside = 0;
+        for (const auto& b : kSamples) {
+          const Eigen::Vector3d p = At(face, b);
+          if (depth.Visible(p)) ++seen;
+          if (options.correction) {
+            const auto px = camera.Project(p);
+            if (px) {
+              const int x = static_cast<int>(std::lround(px->x()));
+              const int y = static_cast<int>(std::lround(px->y()));
+              if (x >= 0 && y >= 0 && x < mask.cols && y < mask.rows &&
+                  mask.at<std::uint8_t>(y, x) >= 128)
+                ++inside;
+            }
+          }
+        }
+        const std::size_t i = f * nv + v;
+        m.cosine[i] = static_cast<float>(c);
+        m.visible[i] = seen == static_cast<int>(kSamples.size()) ? 1 : 0;
+        m.partly[i] = 2 * seen >= static_cast<int>(kSamples.size()) ? 1 : 0;
+        m.on_mask[i] = !options.correction || inside == static_cast<int>(kSamples.size()) ? 1 : 0;
+      }
+      progress.Report(static_cast<std::size_t>(++done), views.size());
+    }
+  });
+  return m;
+}
+
+// Each face's front view: the most frontal view that sees it whole and on the mask; else the
+// most frontal that sees it whole; else the most frontal that sees half of it.
+void ChooseFrontViews(const ViewMeasures& m, std::size_t nf, int nv, bool correction,
+                      GroupingResult* result) {
+  result->views = nv;
+  result->front_view.assign(nf, Mesh::kNoView);
+  result->usable.assign(nf * nv, 0);
+  result->seen.assign(nf * nv, 0);
+  for (std::size_t f = 0; f < nf; ++f) {
+    int best_visible = -1, best_ok = -1, best_partly = -1;
+    for (int v = 0; v < nv; ++v) {
+      const std::size_t i = f * nv + v;
+      if (m.cosine[i] <= 0.0f) continue;
+      if (m.visible[i] && (best_visible < 0 || m.cosine[i] > m.cosine[f * nv + best_visible]))
+        best_visible = v;
+      if (m.visible[i] && m.on_mask[i] && (best_ok < 0 || m.cosine[i] > m.cosine[f * nv + best_ok]))
+        best_ok = v;
+      if (m.partly[i] && (best_partly < 0 || m.cosine[i] > m.cosine[f * nv + best_partly]))
+        best_partly = v;
+      result->usable[i] = m.visible[i] && m.on_mask[i] ? 1 : 0;
+      result->seen[i] = m.visible[i];
+    }
+    int front = best_ok;
+    if (front >= 0 && best_ok != best_visible) ++result->corrected_faces;
+    if (front < 0 && best_visible >= 0) {
+      front = best_visible;
+      if (correction) ++result->uncorrectable_faces;
+    }
+    if (front < 0) front = best_partly;
+    if (front < 0) ++result->unseen_faces;
+    result->front_view[f] = front;
+  }
+}
+
+// Island cleanup: a group of at most `max_island_faces` faces of one front view switches to
+// the neighbouring view its border meets most often for which every face of it is usable.
+void CleanIslands(const std::vector<FaceData>& faces, int max_island_faces,
+                  GroupingResult* result) {
+  const std::size_t nf = faces.size();
+  const int nv = result->views;
+  std::vector<int> component(nf, -1);
+  for (std::size_t seed = 0; seed < nf; ++seed) {
+    if (component[seed] >= 0 || result->front_view[seed] < 0) continue;
+    const int view = result->front_view[seed];
+    std::vector<int> members{static_cast<int>(seed)};
+    component[seed] = static_cast<int>(seed);
+    std::map<int, int> around;  // neighbouring views, by count
+    for (std::size_t k = 0; k < members.size(); ++k) {
+      for (const int g : faces[members[k]].across) {
+        if (g < 0) continue;
+        if (result->front_view[g] == view) {
+          if (component[g] < 0) {
+            component[g] = static_cast<int>(seed);
+            members.push_back(g);
+          }
+        } else if (result->front_view[g] >= 0) {
+          ++around[result->front_view[g]];
+        }
+      }
+    }
+    if (static_cast<int>(members.size()) > max_island_faces || around.empty()) continue;
+    std::vector<std::pair<int, int>> ranked(around.begin(), around.end());
+    std::sort(ranked.begin(), ranked.end(), [](auto a, auto b) { return a.second > b.second; });
+    for (const auto& candidate : ranked) {
+      const int other = candidate.first;
+      const bool fits = std::all_of(members.begin(), members.end(), [&](int m) {
+        return result->usable[static_cast<std::size_t>(m) * nv + other] != 0;
+      });
+      if (!fits) continue;
+      for (const int m : members) result->front_view[m] = other;
+      result->island_faces_switched += static_cast<int>(members.size());
+      break;
+    }
+  }
+}
+
+}  // namespace
+
+const OptionTable<GroupingOptions>& GroupingOptions::Fields() {
+  using O = GroupingOptions;
+  static const OptionTable<O> table = [] {
+    OptionTable<O> t;
+    t.Add(&O::exclude_views, {.name = "exclude-views",
+                              .help = "views not to texture from (held out), e.g. 3,11",
+                              .min = 0});
+    t.Add(&O::correction,
+          {.name = "correction",
+           .help = "refuse photos whose mask shows background under a face or texel"});
+    t.Add(&O::max_island_faces,
+          {.name = "max-island-faces",
+           .help = "groups of at most this many faces may switch to a neighbour's photo",
+           .unit = "faces",
+           .min = 1,
+           .special = 0,
+           .special_meaning = "no island cleanup",
+           .advanced = true});
+    t.Add(&O::zbuffer_max_side, {.name = "zbuffer-max-side",
+                                 .help = "longest side of the per-view visibility z-buffers",
+                                 .unit = "px",
+                                 .min = 64,
+                                 .max = 8192,
+                                 .advanced = true});
+    return t;
+  }();
+  return table;
+}
+
+void GroupingOptions::Validate() const { Fields().Check(*this); }
+
+GroupingResult GroupFaces(const Mesh& mesh, const std::vector<View>& views,
+                          const GroupingOptions& options, Progress& progress) {
+  options.Validate();
+  internal::CheckViews(views);
+  const int nv = static_cast<int>(views.size());
+  std::vector<unsigned char> excluded(nv, 0);
+  for (const int v : options.exclude_views) {
+    CAROUSEL_THROW_IF(v < 0 || v >= nv, InvalidArgument,
+                      "texture: excluded view " << v << " outside 0.." << nv - 1);
+    excluded[v] = 1;
+  }
+  Stopwatch stopwatch;
+  progress.BeginStage("texture: grouping");
+  const std::vector<FaceData> faces = internal::ReadFaces(mesh);
+  const ViewMeasures measures = MeasureViews(faces, views, excluded, options, progress);
+  GroupingResult result;
+  ChooseFrontViews(measures, faces.size(), nv, options.correction, &result);
+  if (options.max_island_faces > 0) CleanIslands(faces, options.max_island_faces, &result);
+  progress.EndStage();
+  result.seconds = stopwatch.ElapsedSeconds();
+  return result;
+}
+
+}  // namespace carousel::texture

@@ -1,0 +1,217 @@
+// The texel transfer of TransferTexture (texture_map.h): every texel's surface point projected
+// into its face's front photo and sampled there, or, where the front photo shows background,
+// in another view that sees the face.
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <utility>
+
+#include <opencv2/imgproc.hpp>
+
+#include "carousel/core/parallel.h"
+#include "carousel/core/raster.h"
+#include "texture_map_steps.h"
+
+namespace carousel::texture::internal {
+namespace {
+
+// Bilinear sample of an 8-bit BGR image at a pixel position (integer = pixel centre).
+bool SampleBilinear(const cv::Mat& image, const Eigen::Vector2d& px, cv::Vec3d* out) {
+  const double x = px.x(), y = px.y();
+  if (!(x >= 0.0 && y >= 0.0 && x <= image.cols - 1 && y <= image.rows - 1)) return false;
+  const int x0 = std::min(static_cast<int>(x), image.cols - 2 < 0 ? 0 : image.cols - 2);
+  const int y0 = std::min(static_cast<int>(y), image.rows - 2 < 0 ? 0 : image.rows - 2);
+  const int x1 = std::min(x0 + 1, image.cols - 1), y1 = std::min(y0 + 1, image.rows - 1);
+  const double fx = x - x0, fy = y - y0;
+  const auto& a = image.at<cv::Vec3b>(y0, x0);
+  const auto& b = image.at<cv::Vec3b>(y0, x1);
+  const auto& c = image.at<cv::Vec3b>(y1, x0);
+  const auto& d = image.at<cv::Vec3b>(y1, x1);
+  for (int k = 0; k < 3; ++k)
+    (*out)[k] = (1 - fy) * ((1 - fx) * a[k] + fx * b[k]) + fy * ((1 - fx) * c[k] + fx * d[k]);
+  return true;
+}
+
+// What TransferFace reads.
+struct TransferInputs {
+  const std::vector<FaceData>& faces;
+  const std::vector<View>& views;
+  const GroupingResult& grouping;
+  const ViewSampler& sampler;
+  const TransferOptions& options;
+  int size;
+};
+
+struct FaceCounts {
+  int blended = 0;
+  int corrected = 0;
+};
+
+// The texels of face f (front view v) from the photos, into `map`; texels on the background
+// in every view that sees the face go to `holes` (covered, not coloured).
+FaceCounts TransferFace(const TransferInputs& in, int f, std::vector<cv::Point>* holes,
+                        TransferredTexels* texels, TextureMap* map) {
+  FaceCounts counts;
+  const FaceData& face = in.faces[f];
+  const int v = in.grouping.front_view[f];
+  const int nv = in.grouping.views;
+  const int size = in.size;
+  std::array<Eigen::Vector2d, 3> t;
+  for (int i = 0; i < 3; ++i)
+    t[i] = Eigen::Vector2d(face.uv[i].x() * size - 0.5, (1.0 - face.uv[i].y()) * size - 0.5);
+  const double area = (t[1] - t[0]).x() * (t[2] - t[0]).y() - (t[1] - t[0]).y() * (t[2] - t[0]).x();
+  if (std::abs(area) < 1e-12) return counts;
+  std::array<int, 3> seam{-1, -1, -1};
+  if (in.options.blend) seam = SeamViews(in.faces, f, v, in.grouping);
+  // Other views for texels the front photo shows on the background, best angle first.
+  std::vector<std::pair<double, int>> others;
+  if (in.options.correction)
+    for (int w = 0; w < nv; ++w)
+      if (w != v && in.grouping.seen[static_cast<std::size_t>(f) * nv + w])
+        others.emplace_back(
+            -face.normal.dot((in.views[w].camera().Centre() - At(face, kSamples[0])).normalized()),
+            w);
+  std::sort(others.begin(), others.end());
+  int covered = 0;
+  ForEachPixelCentreIn(t, size, size, [&](int x, int y) {
+    const Eigen::Vector2d q(x, y);
+    const double b1 =
+        ((q - t[0]).x() * (t[2] - t[0]).y() - (q - t[0]).y() * (t[2] - t[0]).x()) / area;
+    const double b2 =
+        ((t[1] - t[0]).x() * (q - t[0]).y() - (t[1] - t[0]).y() * (q - t[0]).x()) / area;
+    const std::array<double, 3> b{1.0 - b1 - b2, b1, b2};
+    const Eigen::Vector3d p = At(face, b);
+    cv::Vec3d colour;
+    int source = v;
+    if (in.options.correction && !in.sampler.OnObject(v, p)) {
+      source = -1;
+      for (const auto& [score, w] : others)
+        if (in.sampler.OnObject(w, p)) {
+          source = w;
+          break;
+        }
+      if (source < 0) {
+        holes->emplace_back(x, y);
+        map->coverage.at<std::uint8_t>(y, x) = 255;
+        ++covered;
+        return;
+      }
+      ++counts.corrected;
+    }
+    if (!in.sampler.Sample(source, p, &colour)) return;
+    if (source == v && BlendAcrossSeam(in.sampler, seam, b, p, in.options.correction, &colour))
+      ++counts.blended;
+    map->texture.at<cv::Vec3b>(y, x) = cv::Vec3b(cv::saturate_cast<std::uint8_t>(colour[0]),
+                                                 cv::saturate_cast<std::uint8_t>(colour[1]),
+                                                 cv::saturate_cast<std::uint8_t>(colour[2]));
+    map->coverage.at<std::uint8_t>(y, x) = 255;
+    texels->face_sum[f] += colour;
+    ++texels->face_count[f];
+    ++covered;
+  });
+  map->texels_per_face[f] = covered;
+  const double pixels = ProjectedArea(face, in.views[v].camera());
+  map->density_ratio[f] = pixels > 0.0 ? covered / pixels : 0.0;
+  return counts;
+}
+
+}  // namespace
+
+ViewSampler::ViewSampler(const std::vector<View>& views, const GroupingResult& grouping,
+                         const TransferOptions& options)
+    : views_(views),
+      photos_(views.size()),
+      masks_(views.size()),
+      gains_(views.size(), cv::Vec3d(1, 1, 1)) {
+  const int nv = static_cast<int>(views.size());
+  // Photos of the views in use.
+  {
+    std::vector<unsigned char> used(nv, 0);
+    for (const int v : grouping.front_view)
+      if (v >= 0) used[v] = 1;
+    ParallelFor(views.size(), 1, 0, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t v = begin; v < end; ++v)
+        if (used[v]) photos_[v] = views[v].Image();
+    });
+  }
+  // Masks of the views that may serve a texel.
+  if (options.correction) {
+    std::vector<unsigned char> needed(nv, 0);
+    for (std::size_t i = 0; i < grouping.seen.size(); ++i)
+      if (grouping.seen[i]) needed[i % nv] = 1;
+    ParallelFor(views.size(), 1, 0, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t v = begin; v < end; ++v)
+        if (needed[v]) {
+          // Shrunk by 2 pixels: the silhouette's edge pixels mix object and background.
+          cv::erode(views[v].Mask() >= 128, masks_[v],
+                    cv::getStructuringElement(cv::MORPH_ELLIPSE, {5, 5}));
+          if (photos_[v].empty()) photos_[v] = views[v].Image();
+        }
+    });
+  }
+  // Photos the gains are measured in.
+  if (options.gain) {
+    const std::size_t nf = grouping.front_view.size();
+    for (int v = 0; v < nv; ++v)
+      if (photos_[v].empty()) {
+        bool any = false;
+        for (std::size_t f = 0; f < nf && !any; ++f) any = grouping.usable[f * nv + v] != 0;
+        if (any) photos_[v] = views[v].Image();
+      }
+  }
+}
+
+bool ViewSampler::OnObject(int v, const Eigen::Vector3d& p) const {
+  if (masks_[v].empty()) return true;
+  const Eigen::Vector3d c = views_[v].camera().cam_from_world * p;
+  if (c.z() <= 1e-6) return false;
+  const Eigen::Vector2d px = views_[v].camera().ProjectFromCam(c);
+  const int x = static_cast<int>(std::lround(px.x())), y = static_cast<int>(std::lround(px.y()));
+  return x >= 0 && y >= 0 && x < masks_[v].cols && y < masks_[v].rows &&
+         masks_[v].at<std::uint8_t>(y, x) >= 128;
+}
+
+bool ViewSampler::Sample(int v, const Eigen::Vector3d& p, cv::Vec3d* colour) const {
+  if (photos_[v].empty()) return false;
+  const Eigen::Vector3d c = views_[v].camera().cam_from_world * p;
+  if (c.z() <= 1e-6) return false;
+  if (!SampleBilinear(photos_[v], views_[v].camera().ProjectFromCam(c), colour)) return false;
+  for (int k = 0; k < 3; ++k) (*colour)[k] *= gains_[v][k];
+  return true;
+}
+
+TransferredTexels TransferCharts(const std::vector<FaceData>& faces, const std::vector<View>& views,
+                                 const GroupingResult& grouping, const ViewSampler& sampler,
+                                 const TransferOptions& options, int size, Progress& progress,
+                                 TextureMap* map) {
+  const std::size_t nf = faces.size();
+  // Faces by chart: charts never share texels, so charts can be filled in parallel.
+  int charts = 0;
+  for (const FaceData& f : faces) charts = std::max(charts, f.chart + 1);
+  std::vector<std::vector<int>> chart_faces(std::max(charts, 1));
+  for (std::size_t f = 0; f < nf; ++f)
+    chart_faces[std::max(faces[f].chart, 0)].push_back(static_cast<int>(f));
+  TransferredTexels texels;
+  texels.face_sum.assign(nf, cv::Vec3d(0, 0, 0));
+  texels.face_count.assign(nf, 0);
+  texels.holes.resize(chart_faces.size());
+  const TransferInputs in{faces, views, grouping, sampler, options, size};
+  std::atomic<int> blended{0}, corrected{0};
+  std::atomic<std::size_t> charts_done{0};
+  ParallelFor(chart_faces.size(), 1, 0, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t c = begin; c < end; ++c) {
+      for (const int f : chart_faces[c]) {
+        if (grouping.front_view[f] < 0) continue;
+        const FaceCounts counts = TransferFace(in, f, &texels.holes[c], &texels, map);
+        blended += counts.blended;
+        corrected += counts.corrected;
+      }
+      progress.Report(++charts_done, chart_faces.size());
+    }
+  });
+  map->blended_texels = blended.load();
+  map->corrected_texels = corrected.load();
+  return texels;
+}
+
+}  // namespace carousel::texture::internal
