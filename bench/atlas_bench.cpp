@@ -47,10 +47,10 @@ void Report(const std::string& name, const Mesh& input, const texture::AtlasOpti
         name.c_str(), mesh.n_faces(), texture::PackingModeName(mode), seconds, r.seconds_charts,
         r.seconds_parameterization, r.seconds_packing, q.charts, r.seeds_grown_into, r.charts_split,
         q.l2_stretch, q.max_face_stretch, q.angle_distortion_deg, 100.0 * q.utilization,
-        q.texels_per_metre, o.packing.size, q.Valid(), q.flipped_faces, q.overlapping_texels,
+        q.texels_per_metre, r.size, q.Valid(), q.flipped_faces, q.overlapping_texels,
         q.gutter_violations, q.charts_not_disks);
     if (!g_charts_image.empty() && mode == texture::PackingMode::kObb)
-      WriteImage(g_charts_image, texture::DrawCharts(mesh, std::min(o.packing.size, 2048)));
+      WriteImage(g_charts_image, texture::DrawCharts(mesh, std::min(r.size, 2048)));
   }
 }
 
@@ -65,7 +65,7 @@ int main(int argc, char** argv) {
   flags.List("--faces", &faces, "marching-cubes meshes of about this many faces")
       .Option("--mesh", &mesh_file, "a mesh file instead")
       .Option("--noise", &noise, "noise of the marching-cubes blobs")
-      .Option("--size", &options.packing.size, "atlas size, texels")
+      .Option("--size", &options.size.size, "atlas size, texels")
       .Option("--seeds", &options.charts.seeds, "initial chart seeds")
       .Option("--max-normal-deviation", &options.charts.max_normal_deviation_deg,
               "chart normal spread, degrees")

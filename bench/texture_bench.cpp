@@ -70,7 +70,7 @@ int Run(int argc, char** argv) {
     }
     for (const int size : sizes) {
       studio::TextureSessionOptions options;
-      options.size = size;
+      options.atlas.size.size = size;
       options.grouping.exclude_views = exclude;
       options.grouping.correction = correction;
       options.transfer.blend = blend;

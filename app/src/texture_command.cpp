@@ -33,7 +33,7 @@ int RunTextureAtlas(AtlasArgs& args, Io& io) {
   const texture::AtlasResult result = texture::BuildAtlas(&mesh, args.options, cli.progress());
   const double seconds = total.ElapsedSeconds() - result.seconds_quality;
   WriteMesh(mesh, args.out);
-  const int size = args.options.packing.size;
+  const int size = result.size;
   if (!args.charts_image.empty()) {
     CreateParentFolder(args.charts_image);
     WriteImage(args.charts_image, texture::DrawCharts(mesh, std::min(size, 4096)));

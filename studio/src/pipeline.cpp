@@ -75,13 +75,13 @@ std::string Describe(const TextureSessionOptions& o) {
              "chart_iterations", c.max_iterations)("random", c.random_seed)(
              "abf_iterations", p.max_abf_iterations)("abf_tolerance", p.abf_tolerance)(
              "split", p.max_split_depth)("stretch", p.max_chart_stretch)(
-             "packing", static_cast<int>(k.mode))("atlas_size", k.size)("gutter", k.gutter_texels)(
+             "packing", static_cast<int>(k.mode))("atlas_size", 4096)("gutter", k.gutter_texels)(
              "exclude", excluded.str())("correction", g.correction)("island", g.max_island_faces)(
-             "zbuffer", g.zbuffer_max_side)("transfer_size", t.size)("blend", t.blend)(
+             "zbuffer", g.zbuffer_max_side)("transfer_size", 4096)("blend", t.blend)(
              "gain", t.gain)("transfer_correction", t.correction)("dilation", t.dilation_texels)(
              "name", e.name)("glb", e.glb)("jpeg", e.jpeg_in_glb)("jpeg_quality", e.jpeg_quality)(
-             "png", e.png_compression)("size", o.size)("max_size", o.max_size)("coverage",
-                                                                               o.density_coverage)
+             "png", e.png_compression)("size", o.atlas.size.size)("max_size", o.atlas.size.max_size)(
+             "coverage", o.atlas.size.density_coverage)
       .str();
 }
 

@@ -44,7 +44,7 @@ json RunToJson(const RunOptions& o) {
         {"target_height_m", s.placement.target_height_m},
         {"scale", s.placement.scale},
         {"yaw_rad", s.placement.yaw_rad}}},
-      {"texture", {{"exclude_views", o.texture.grouping.exclude_views}, {"size", o.texture.size}}}};
+      {"texture", {{"exclude_views", o.texture.grouping.exclude_views}, {"size", o.texture.atlas.size.size}}}};
   // The rig as it was when the session started: a resume uses the same devices and plan even
   // if the rig file changed meanwhile.
   if (o.hardware) run["rig"] = json::parse(RigConfigToJsonText(*o.hardware));
@@ -83,7 +83,7 @@ RunOptions RunFromJson(const std::filesystem::path& path) {
     o.sim.placement.scale = s.at("scale").get<double>();
     o.sim.placement.yaw_rad = s.at("yaw_rad").get<double>();
     o.texture.grouping.exclude_views = j.at("texture").at("exclude_views").get<std::vector<int>>();
-    o.texture.size = j.at("texture").at("size").get<int>();
+    o.texture.atlas.size.size = j.at("texture").at("size").get<int>();
     if (j.contains("calibration")) o.calibration = CalibrationPlanFromJson(j["calibration"], path);
     if (j.contains("calibration_file"))
       o.calibration_file = path.parent_path() / j["calibration_file"].get<std::string>();

@@ -32,9 +32,14 @@ void TextureSessionOptions::Validate() const {
 
 TextureSessionResult TextureSession(const std::filesystem::path& session_folder,
                                     const TextureSessionOptions& options, Progress& progress) {
+  Session session = ReadSession(session_folder);
+  return TextureSession(session_folder, session, options, progress);
+}
+
+TextureSessionResult TextureSession(const std::filesystem::path& session_folder, Session& session,
+                                    const TextureSessionOptions& options, Progress& progress) {
   options.Validate();
   Stopwatch total;
-  Session session = ReadSession(session_folder);
   const std::filesystem::path mesh_path = session_folder / "recon" / "mesh.ply";
   if (!std::filesystem::exists(mesh_path))
     throw IoError(mesh_path, "no reconstructed mesh (run `carousel reconstruct` first)");
@@ -127,7 +132,6 @@ TextureSessionResult TextureSession(const std::filesystem::path& session_folder,
                     .total = result.seconds_total};
   texture::WriteQualityReport(report, model);
   // The manifest last, once every file is on disk.
-  session = ReadSession(session_folder);
   session.stages["texture"] = "done";
   WriteSessionManifest(session_folder, session);
   return result;

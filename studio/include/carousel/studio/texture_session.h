@@ -17,6 +17,7 @@
 #include "carousel/texture/atlas.h"
 #include "carousel/texture/export.h"
 #include "carousel/texture/held_out.h"
+#include "carousel/studio/session.h"
 #include "carousel/texture/texture_map.h"
 
 namespace carousel::studio {
@@ -63,6 +64,10 @@ struct TextureSessionResult {
 // \throw IoError/FormatError naming the session file at fault (no mesh: run reconstruct
 // first), InvalidArgument, Cancelled.
 TextureSessionResult TextureSession(const std::filesystem::path& session_folder,
+                                    const TextureSessionOptions& options, Progress& progress);
+// The same on a session already read (one run reads session.json once); `session` records
+// the stage and is written back.
+TextureSessionResult TextureSession(const std::filesystem::path& session_folder, Session& session,
                                     const TextureSessionOptions& options, Progress& progress);
 
 }  // namespace carousel::studio
