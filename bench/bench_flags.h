@@ -62,7 +62,10 @@ class BenchFlags {
   // A comma-separated list of whole numbers.
   BenchFlags& List(const char* name, std::vector<int>* values, const char* help = "") {
     std::string text;
-    for (const int v : *values) text += (text.empty() ? "" : ",") + std::to_string(v);
+    for (const int v : *values) {
+      if (!text.empty()) text.push_back(',');
+      text.append(std::to_string(v));
+    }
     return Add(
         {name, help, "INT,...", text, Kind::kList, [values](std::string_view items, bool first) {
            if (first) values->clear();
@@ -146,8 +149,10 @@ class BenchFlags {
     std::vector<std::pair<std::string, std::string>> lines;  // "--name TYPE", "help (default)"
     for (const Entry& e : entries_) {
       std::string text = e.help;
-      if (!e.default_text.empty())
-        text += (text.empty() ? "(default " : " (default ") + e.default_text + ")";
+      if (!e.default_text.empty()) {
+        text.append(text.empty() ? "(default " : " (default ");
+        text.append(e.default_text).append(")");
+      }
       lines.emplace_back(e.type.empty() ? e.name : e.name + " " + e.type, text);
     }
     lines.emplace_back("-h, --help", "print this help and exit");

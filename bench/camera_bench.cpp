@@ -110,9 +110,9 @@ int Run(int argc, char** argv) {
         const auto t0 = Clock::now();
         const rig::CapturedPhoto photo = bodies[c]->Capture(std::chrono::seconds(30));
         const auto t1 = Clock::now();
-        bodies[c]->Download(photo,
-                            work / ("c" + std::to_string(c) + "_" + std::to_string(s) + ".jpg"),
-                            true, std::chrono::seconds(60));
+        std::string name = "c";  // built by append: GCC 12 warns falsely on "c" + string
+        name.append(std::to_string(c)).append("_").append(std::to_string(s)).append(".jpg");
+        bodies[c]->Download(photo, work / name, true, std::chrono::seconds(60));
         return std::make_pair(Ms(t1 - t0), Ms(Clock::now() - t1));
       }));
     }

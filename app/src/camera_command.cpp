@@ -250,8 +250,7 @@ int RunSimCamera(const SimCameraArgs& args, std::ostream& out, std::ostream& /*e
 
 void AddCameraCommand(CLI::App& command, Dispatch& dispatch) {
   auto args = std::make_shared<CameraArgs>();
-  command.add_option("action", args->action, "list, watch, summary, config or capture")
-      ->required();
+  command.add_option("action", args->action, "list, watch, summary, config or capture")->required();
   command.add_option("--port", args->port,
                      "libgphoto2 port: usb:BUS,DEV or ptpip:HOST:PORT:PORT (default: the only "
                      "camera found)");
@@ -265,8 +264,7 @@ void AddCameraCommand(CLI::App& command, Dispatch& dispatch) {
   command.add_flag("--delete", args->delete_after,
                    "capture: delete each photo from the camera once saved");
   command.add_option("--seconds", args->seconds, "watch: how long to watch, 0 = until Ctrl-C");
-  command.add_option("--timeout", args->timeout_s, "per operation, seconds")
-      ->capture_default_str();
+  command.add_option("--timeout", args->timeout_s, "per operation, seconds")->capture_default_str();
   dispatch.On(&command, [args](Io& io) { return RunCamera(*args, io.out, io.err); });
 }
 

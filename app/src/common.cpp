@@ -49,7 +49,8 @@ void CreateParentFolder(const std::filesystem::path& file) {
   std::error_code ec;
   if (std::filesystem::is_directory(parent, ec)) return;
   std::filesystem::create_directories(parent, ec);
-  if (ec) throw IoError(parent, "cannot create the folder for " + file.string() + ": " + ec.message());
+  if (ec)
+    throw IoError(parent, "cannot create the folder for " + file.string() + ": " + ec.message());
 }
 
 std::string OptionHelp(const OptionInfo& info) {

@@ -64,16 +64,15 @@ int RunOneButton(RunArgs& args, Io& io) {
            << " photos taken, " << result.photos_kept << " kept from before, "
            << result.photos_retaken << " retaken\n";
     if (result.calibration) PrintCalibration(*result.calibration, io.out);
-    io.out << "calibration: "
-           << (result.session / "calibration" / "rig_calibration.json").string()
+    io.out << "calibration: " << (result.session / "calibration" / "rig_calibration.json").string()
            << " (carousel run --calibration-file FILE, or \"calibration_file\" in rig.json)\n";
     return kExitOk;
   }
   io.out << "session " << result.session.string() << ": " << result.photos_taken
          << " photos taken, " << result.photos_kept << " kept from before, "
-         << result.photos_adopted << " adopted, " << result.photos_retaken << " retaken; reconstruct "
-         << (result.reconstructed ? "ran" : "was current") << ", texture "
-         << (result.textured ? "ran" : "was current") << "\n";
+         << result.photos_adopted << " adopted, " << result.photos_retaken
+         << " retaken; reconstruct " << (result.reconstructed ? "ran" : "was current")
+         << ", texture " << (result.textured ? "ran" : "was current") << "\n";
   if (result.photos_taken > 0 && result.max_trigger_skew_ms > 0)
     io.out << std::fixed << std::setprecision(1) << "trigger skew between cameras: at most "
            << result.max_trigger_skew_ms << " ms\n";

@@ -36,10 +36,9 @@ void AddSimCommands(CLI::App& command, Dispatch& dispatch) {
     return kExitOk;
   });
 
-  AddSimCameraCommand(
-      *command.add_subcommand("camera",
-                              "a PTP/IP camera on 127.0.0.1 photographing the simulated rig"),
-      dispatch);
+  AddSimCameraCommand(*command.add_subcommand(
+                          "camera", "a PTP/IP camera on 127.0.0.1 photographing the simulated rig"),
+                      dispatch);
   AddSimTurntableCommand(
       *command.add_subcommand("turntable",
                               "the turntable firmware in simavr, its serial port on a PTY"),

@@ -53,8 +53,8 @@ int RunTextureAtlas(AtlasArgs& args, Io& io) {
          << result.seconds_packing << " s\n";
   if (!q.Valid()) {
     io.err << "carousel texture atlas: the atlas failed its checks (flipped " << q.flipped_faces
-           << ", overlapping texels " << q.overlapping_texels << ", gutter "
-           << q.gutter_violations << ")\n";
+           << ", overlapping texels " << q.overlapping_texels << ", gutter " << q.gutter_violations
+           << ")\n";
     return kExitFailure;
   }
   return kExitOk;
@@ -80,8 +80,8 @@ void AddTextureCommands(CLI::App& command, Dispatch& dispatch) {
   });
 
   auto atlas = std::make_shared<AtlasArgs>();
-  CLI::App* atlas_command = command.add_subcommand(
-      "atlas", "charts, flattening and packing of a mesh: an OBJ with UVs");
+  CLI::App* atlas_command =
+      command.add_subcommand("atlas", "charts, flattening and packing of a mesh: an OBJ with UVs");
   atlas_command->add_option("mesh", atlas->mesh, "mesh file (OBJ, PLY, OFF)")->required();
   atlas_command->add_option("--out", atlas->out, "output OBJ with UVs")->required();
   AddOptionFlags(atlas_command, atlas->options, texture::AtlasOptions::Fields());

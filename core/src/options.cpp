@@ -71,7 +71,8 @@ void CheckOptionChoice(const OptionInfo& info, const std::string& value) {
 void CheckOptionName(const std::vector<std::string>& taken, const std::string& name) {
   bool well_formed = !name.empty() && name.front() != '-' && name.back() != '-';
   for (const char ch : name)
-    well_formed = well_formed && ((ch >= 'a' && ch <= 'z') || (ch >= '0' && ch <= '9') || ch == '-');
+    well_formed =
+        well_formed && ((ch >= 'a' && ch <= 'z') || (ch >= '0' && ch <= '9') || ch == '-');
   if (!well_formed) throw std::logic_error("option name '" + name + "' is not a flag name");
   for (const std::string& t : taken)
     if (t == name) throw std::logic_error("option '" + name + "' is described twice");

@@ -221,7 +221,8 @@ const OptionTable<MeshOptimizationOptions>& MeshOptimizationOptions::Fields() {
                           .min_exclusive = true,
                           .max_exclusive = true,
                           .advanced = true});
-    t.Add(&O::remesh, {.name = "remesh", .help = "isotropic remeshing before the final decimation"});
+    t.Add(&O::remesh,
+          {.name = "remesh", .help = "isotropic remeshing before the final decimation"});
     t.Add(&O::remesh_iterations, {.name = "remesh-iterations",
                                   .help = "isotropic remeshing passes",
                                   .min = 1,
@@ -260,9 +261,9 @@ const OptionTable<MeshOptimizationOptions>& MeshOptimizationOptions::Fields() {
 
 void MeshOptimizationOptions::Validate() const {
   Fields().Check(*this);
-  CAROUSEL_THROW_IF(!(taubin_mu < -taubin_lambda), InvalidArgument,
-                    "--taubin-mu must be below -(--taubin-lambda) (" << -taubin_lambda
-                                                                     << "), got " << taubin_mu);
+  CAROUSEL_THROW_IF(
+      !(taubin_mu < -taubin_lambda), InvalidArgument,
+      "--taubin-mu must be below -(--taubin-lambda) (" << -taubin_lambda << "), got " << taubin_mu);
 }
 
 void TaubinSmooth(Mesh* mesh, int iterations, double lambda, double mu) {

@@ -80,8 +80,8 @@ std::string Describe(const TextureSessionOptions& o) {
              "zbuffer", g.zbuffer_max_side)("transfer_size", 4096)("blend", t.blend)(
              "gain", t.gain)("transfer_correction", t.correction)("dilation", t.dilation_texels)(
              "name", e.name)("glb", e.glb)("jpeg", e.jpeg_in_glb)("jpeg_quality", e.jpeg_quality)(
-             "png", e.png_compression)("size", o.atlas.size.size)("max_size", o.atlas.size.max_size)(
-             "coverage", o.atlas.size.density_coverage)
+             "png", e.png_compression)("size", o.atlas.size.size)(
+             "max_size", o.atlas.size.max_size)("coverage", o.atlas.size.density_coverage)
       .str();
 }
 

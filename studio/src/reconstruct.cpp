@@ -63,9 +63,8 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
   return ReconstructSession(session_folder, session, options, progress);
 }
 
-ReconstructResult ReconstructSession(const std::filesystem::path& session_folder,
-                                     Session& session, const ReconstructOptions& requested,
-                                     Progress& progress) {
+ReconstructResult ReconstructSession(const std::filesystem::path& session_folder, Session& session,
+                                     const ReconstructOptions& requested, Progress& progress) {
   requested.Validate();
   if (session.views.size() < 2)
     throw FormatError(session_folder / kManifestName,

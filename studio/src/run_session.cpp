@@ -44,7 +44,8 @@ json RunToJson(const RunOptions& o) {
         {"target_height_m", s.placement.target_height_m},
         {"scale", s.placement.scale},
         {"yaw_rad", s.placement.yaw_rad}}},
-      {"texture", {{"exclude_views", o.texture.grouping.exclude_views}, {"size", o.texture.atlas.size.size}}}};
+      {"texture",
+       {{"exclude_views", o.texture.grouping.exclude_views}, {"size", o.texture.atlas.size.size}}}};
   // The rig as it was when the session started: a resume uses the same devices and plan even
   // if the rig file changed meanwhile.
   if (o.hardware) run["rig"] = json::parse(RigConfigToJsonText(*o.hardware));
@@ -138,9 +139,8 @@ RunResult Continue(const std::filesystem::path& folder, const RunOptions& option
                                          ? recon::SilhouetteMethod::kDifference
                                          : recon::SilhouetteMethod::kKey;
   }
-  const ProcessResult processed =
-      ProcessSession(folder, session, {.reconstruct = reconstruct, .texture = options.texture},
-                     progress);
+  const ProcessResult processed = ProcessSession(
+      folder, session, {.reconstruct = reconstruct, .texture = options.texture}, progress);
   result.reconstructed = processed.reconstruct.has_value();
   result.textured = processed.texture.has_value();
   if (processed.texture) result.texture = *processed.texture;

@@ -71,7 +71,8 @@ const OptionTable<SimCaptureOptions>& SimCaptureOptions::Fields() {
     t.Add(&O::scene,
           {.name = "scene", .help = "shoe, bottle, avocado, duck, or a .gltf/.glb/.obj file"});
     t.Add(&O::data_dir, {.name = "data", .help = "shared test data folder (for model names)"});
-    t.Add(&O::stops, {.name = "views", .help = "turntable stops per camera", .min = 1, .max = 3600});
+    t.Add(&O::stops,
+          {.name = "views", .help = "turntable stops per camera", .min = 1, .max = 3600});
     t.AddText(
         {.name = "size", .help = "image size WxH", .unit = "px"},
         [](const O& o) { return std::to_string(o.rig.width) + "x" + std::to_string(o.rig.height); },
@@ -110,13 +111,14 @@ const OptionTable<SimCaptureOptions>& SimCaptureOptions::Fields() {
            .max = 4,
            .advanced = true},
           [](O& o) -> OptionRef { return &o.render.samples_per_axis; });
-    t.AddText({.name = "backdrop", .help = "white, grey, green, black or #rrggbb"},
-              [](const O&) { return std::string(); },
-              [](O& o, const std::string& text) {
-                const Eigen::Vector3d colour = ParseBackdropColour(text, "backdrop");
-                o.render.backdrop_top = colour;
-                o.render.backdrop_bottom = 0.9 * colour;
-              });
+    t.AddText(
+        {.name = "backdrop", .help = "white, grey, green, black or #rrggbb"},
+        [](const O&) { return std::string(); },
+        [](O& o, const std::string& text) {
+          const Eigen::Vector3d colour = ParseBackdropColour(text, "backdrop");
+          o.render.backdrop_top = colour;
+          o.render.backdrop_bottom = 0.9 * colour;
+        });
     t.Add({.name = "plate-radius",
            .help = "turntable plate radius",
            .unit = "m",

@@ -9,11 +9,11 @@
 #include <fstream>
 #include <sstream>
 
+#include "carousel/app/cli.h"
 #include "carousel/calib/intrinsics.h"
 #include "carousel/calib/rig_calibration.h"
 #include "carousel/core/error.h"
 #include "carousel/core/image_io.h"
-#include "carousel/app/cli.h"
 #include "carousel/studio/session.h"
 #include "carousel/testing/testing.h"
 

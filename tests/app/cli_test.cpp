@@ -1,8 +1,8 @@
 #include "carousel/app/cli.h"
 #include "carousel/core/mesh_io.h"
 #include "carousel/sim/avr_turntable.h"
-#include "carousel/studio/session.h"
 #include "carousel/studio/defaults.h"
+#include "carousel/studio/session.h"
 
 #include <sys/wait.h>
 

@@ -22,10 +22,10 @@
 #include <sstream>
 #include <thread>
 
+#include "carousel/app/cli.h"
 #include "carousel/core/error.h"
 #include "carousel/core/mesh_io.h"
 #include "carousel/core/timer.h"
-#include "carousel/app/cli.h"
 #include "carousel/studio/pipeline.h"
 #include "carousel/studio/session.h"
 #include "carousel/testing/testing.h"

@@ -23,11 +23,8 @@ struct Inner {
     static const OptionTable<Inner> table = [] {
       OptionTable<Inner> t;
       t.Add(&Inner::faces, {.name = "faces", .help = "faces", .min = 100});
-      t.Add(&Inner::fraction, {.name = "fraction",
-                               .help = "a fraction",
-                               .min = 0,
-                               .max = 1,
-                               .min_exclusive = true});
+      t.Add(&Inner::fraction,
+            {.name = "fraction", .help = "a fraction", .min = 0, .max = 1, .min_exclusive = true});
       t.AddChoice(&Inner::mode, {.name = "mode", .help = "how"},
                   {{"fast", Mode::kFast}, {"good", Mode::kGood}});
       return t;
@@ -105,8 +102,9 @@ TEST(OptionsTest, MalformedTablesAreRefused) {
   EXPECT_THROW(t.Add(&Inner::fraction, {.name = "faces"}), std::logic_error);
   EXPECT_THROW(t.Add(&Inner::fraction, {.name = "Fraction"}), std::logic_error);
   EXPECT_THROW(t.Add(&Inner::fraction, {.name = ""}), std::logic_error);
-  EXPECT_THROW(OptionTable<Outer>().Include(&Outer::inner, Inner::Fields()).Include(
-                   &Outer::inner, Inner::Fields()),
+  EXPECT_THROW(OptionTable<Outer>()
+                   .Include(&Outer::inner, Inner::Fields())
+                   .Include(&Outer::inner, Inner::Fields()),
                std::logic_error);
 }
 

@@ -24,11 +24,11 @@
 #include "carousel/sim/ptpip_camera.h"
 #include "carousel/sim/scene.h"
 #include "carousel/sim/sim_rig.h"
+#include "carousel/studio/defaults.h"
 #include "carousel/studio/rig_config.h"
 #include "carousel/studio/run_session.h"
 #include "carousel/studio/session.h"
 #include "carousel/studio/sim_capture.h"
-#include "carousel/studio/defaults.h"
 #include "carousel/testing/testing.h"
 
 namespace carousel::studio {

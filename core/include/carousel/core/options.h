@@ -92,7 +92,8 @@ class OptionTable {
   // A plain field of Owner.
   template <typename T>
   OptionTable& Add(T Owner::*member, OptionInfo info) {
-    return Push({std::move(info), [member](Owner& o) -> OptionRef { return &(o.*member); }, {}, {}});
+    return Push(
+        {std::move(info), [member](Owner& o) -> OptionRef { return &(o.*member); }, {}, {}});
   }
 
   // A field reached some other way (a member of a member).

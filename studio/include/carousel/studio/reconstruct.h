@@ -49,8 +49,7 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
                                      const ReconstructOptions& options, Progress& progress);
 // The same on a session already read (one run reads session.json once): `session` is updated
 // (masks, stage) and written back.
-ReconstructResult ReconstructSession(const std::filesystem::path& session_folder,
-                                     Session& session, const ReconstructOptions& options,
-                                     Progress& progress);
+ReconstructResult ReconstructSession(const std::filesystem::path& session_folder, Session& session,
+                                     const ReconstructOptions& options, Progress& progress);
 
 }  // namespace carousel::studio

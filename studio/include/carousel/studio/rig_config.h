@@ -84,5 +84,4 @@ void WriteRigConfig(const std::filesystem::path& path, const RigConfig& config);
 std::string RigConfigToJsonText(const RigConfig& config);
 RigConfig RigConfigFromJsonText(const std::string& text, const std::filesystem::path& source);
 
-
 }  // namespace carousel::studio

@@ -34,8 +34,8 @@ struct RigBackends {
 
 // What to open.
 struct RigRequest {
-  SimCaptureOptions sim;               // the simulated backend (scene, rig, stops, renderer)
-  std::optional<RigConfig> hardware;   // set: this rig file's devices instead
+  SimCaptureOptions sim;              // the simulated backend (scene, rig, stops, renderer)
+  std::optional<RigConfig> hardware;  // set: this rig file's devices instead
   // Set: a calibration session's board (the simulated rig stands it on its table itself).
   std::optional<CalibrationPlan> calibration;
   // Hardware calibration: asks the operator to place the board for placement `index`.

@@ -7,8 +7,8 @@
 #include <string>
 #include <vector>
 
-#include "carousel/core/progress.h"
 #include "carousel/core/options.h"
+#include "carousel/core/progress.h"
 
 namespace carousel::studio {
 

@@ -23,8 +23,8 @@ namespace carousel::studio {
 // The simulated capture's fields that a one-button session records in its run.json (so a
 // resume photographs the same scene the same way): what `carousel run --sim` offers.
 inline const std::vector<std::string> kRunSimFields = {
-    "scene", "data",  "views", "size",          "elevations", "focal-mm", "distance",
-    "noise", "seed",  "jpeg-quality", "target-height", "scale",      "yaw-deg"};
+    "scene", "data", "views",        "size",          "elevations", "focal-mm", "distance",
+    "noise", "seed", "jpeg-quality", "target-height", "scale",      "yaw-deg"};
 
 // "5184x3456" -> width, height. \throw InvalidArgument naming `flag`.
 void ParseImageSize(const std::string& text, const std::string& flag, int* width, int* height);

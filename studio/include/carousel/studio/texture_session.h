@@ -14,10 +14,10 @@
 
 #include "carousel/core/options.h"
 #include "carousel/core/progress.h"
+#include "carousel/studio/session.h"
 #include "carousel/texture/atlas.h"
 #include "carousel/texture/export.h"
 #include "carousel/texture/held_out.h"
-#include "carousel/studio/session.h"
 #include "carousel/texture/texture_map.h"
 
 namespace carousel::studio {
