@@ -59,6 +59,7 @@ void ReconstructOptions::Validate() const {
 
 ReconstructResult ReconstructSession(const std::filesystem::path& session_folder,
                                      const ReconstructOptions& options, Progress& progress) {
+  options.Validate();  // a bad option is named before any file is read
   Session session = ReadSession(session_folder);
   return ReconstructSession(session_folder, session, options, progress);
 }

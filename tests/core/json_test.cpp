@@ -147,7 +147,7 @@ TEST(JsonTest, FieldsAreTypedAndStrict) {
   fails([&] { paths.RelativePath("empty"); }, "paths.empty is empty");
   EXPECT_FALSE(paths.OptionalRelativePath("none").has_value());
   // A reader bound below the top level prefixes every field.
-  const JsonReader plan(j.at("nested"), "run.json", "calibration");
+  const JsonReader plan(j.at("nested"), "/data/rig.json", "calibration");
   fails([&] { plan.Int("placements"); }, "calibration has no field 'placements'");
 }
 

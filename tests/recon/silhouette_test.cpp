@@ -131,7 +131,7 @@ TEST(SilhouetteTest, RejectsBadInput) {
                              FormatError, "no backdrop to key against");
   SilhouetteOptions bad;
   bad.chroma_threshold = 0.0;
-  CAROUSEL_EXPECT_THROW_WITH(bad.Validate(), InvalidArgument, "chroma_threshold");
+  CAROUSEL_EXPECT_THROW_WITH(bad.Validate(), InvalidArgument, "--chroma-threshold must be > 0");
   EXPECT_THROW(ParseSilhouetteMethod("magic"), InvalidArgument);
 }
 
