@@ -12,7 +12,7 @@
 namespace carousel::app {
 namespace {
 
-const CommandGroup kCommands[] = {
+constexpr CommandGroup kCommands[] = {
     {"self-check",
      "check this build: camera model vs OpenCV, image and mesh files, shared test data",
      AddSelfCheckCommand},

@@ -98,7 +98,7 @@ void AddRunCommand(CLI::App& command, Dispatch& dispatch) {
   // What a resume needs again is kept in run.json: the simulated capture's recorded fields and
   // the held-out views.
   AddOptionFlags(&command, args->options.sim,
-                 studio::SimCaptureOptions::Fields().Only(studio::kRunSimFields));
+                 studio::SimCaptureOptions::Fields().Only(studio::RunSimFieldNames()));
   AddOptionFlags(&command, args->options.texture,
                  studio::TextureSessionOptions::Fields().Only({"exclude-views"}));
   command.add_flag("--force", args->options.force,

@@ -64,6 +64,13 @@ Eigen::Vector3d ParseBackdropColour(const std::string& text, const std::string& 
                         text + "'");
 }
 
+const std::vector<std::string>& RunSimFieldNames() {
+  static const std::vector<std::string> names = {
+      "scene", "data", "views",        "size",          "elevations", "focal-mm", "distance",
+      "noise", "seed", "jpeg-quality", "target-height", "scale",      "yaw-deg"};
+  return names;
+}
+
 const OptionTable<SimCaptureOptions>& SimCaptureOptions::Fields() {
   using O = SimCaptureOptions;
   static const OptionTable<O> table = [] {

@@ -22,9 +22,7 @@ namespace carousel::studio {
 
 // The simulated capture's fields that a one-button session records in its run.json (so a
 // resume photographs the same scene the same way): what `carousel run --sim` offers.
-inline const std::vector<std::string> kRunSimFields = {
-    "scene", "data", "views",        "size",          "elevations", "focal-mm", "distance",
-    "noise", "seed", "jpeg-quality", "target-height", "scale",      "yaw-deg"};
+const std::vector<std::string>& RunSimFieldNames();
 
 // "5184x3456" -> width, height. \throw InvalidArgument naming `flag`.
 void ParseImageSize(const std::string& text, const std::string& flag, int* width, int* height);
@@ -53,7 +51,7 @@ struct SimCaptureOptions {
   // Replace an existing session folder (after the new one is complete).
   bool overwrite = false;
   // Every field a person sets (core/options.h); `run` offers the ones its run.json keeps
-  // (kRunSimFields).
+  // (RunSimFieldNames()).
   static const OptionTable<SimCaptureOptions>& Fields();
   void Validate() const;
 };
