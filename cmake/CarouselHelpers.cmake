@@ -101,5 +101,9 @@ function(carousel_add_test name)
     # Listing takes 0.4 s, but a loaded 2-core CI machine once exceeded CMake's 5 s default.
     DISCOVERY_TIMEOUT 60
     TEST_PREFIX "${name}."
-    PROPERTIES LABELS "${ARG_LABELS}" TIMEOUT ${ARG_TIMEOUT})
+    # The folder testing::SharedFixture shares between the test processes of one CTest run;
+    # the fixture carousel_test_cache empties it before any test starts.
+    PROPERTIES LABELS "${ARG_LABELS}" TIMEOUT ${ARG_TIMEOUT}
+      ENVIRONMENT "CAROUSEL_TEST_CACHE_DIR=${CMAKE_BINARY_DIR}/test-cache"
+      FIXTURES_REQUIRED carousel_test_cache)
 endfunction()

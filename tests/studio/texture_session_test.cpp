@@ -23,30 +23,37 @@ namespace {
 using testing::TempDir;
 
 // A small shoe session: 2 cameras x 12 stops at 720x480, a green backdrop (no green on the
-// shoe, so background-coloured texels can be counted), reconstructed.
+// shoe, so background-coloured texels can be counted), reconstructed. Made once per CTest run
+// (SharedFixture) and copied by every test that textures or changes it.
 class TextureSessionTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     shared_dir = new TempDir();
-    SimCaptureOptions capture;
-    capture.scene = "shoe";
-    capture.data_dir = testing::SharedDataDir();
-    capture.stops = 12;
-    capture.rig.width = 720;
-    capture.rig.height = 480;
-    capture.rig.elevations_deg = {15, 45};
-    capture.render.backdrop_top = Eigen::Vector3d(0.15, 0.75, 0.25);
-    capture.render.backdrop_bottom = Eigen::Vector3d(0.12, 0.65, 0.2);
-    Progress progress;
-    SimulateCapture(capture, Folder(), progress);
-    ReconstructOptions recon;
-    ReconstructSession(Folder(), recon, progress);
+    session = new std::filesystem::path(
+        testing::SharedFixture("texture-session-shoe", [](const std::filesystem::path& folder) {
+          SimCaptureOptions capture;
+          capture.scene = "shoe";
+          capture.data_dir = testing::SharedDataDir();
+          capture.stops = 12;
+          capture.rig.width = 720;
+          capture.rig.height = 480;
+          capture.rig.elevations_deg = {15, 45};
+          capture.render.backdrop_top = Eigen::Vector3d(0.15, 0.75, 0.25);
+          capture.render.backdrop_bottom = Eigen::Vector3d(0.12, 0.65, 0.2);
+          Progress progress;
+          SimulateCapture(capture, folder, progress);
+          ReconstructOptions recon;
+          ReconstructSession(folder, recon, progress);
+        }));
   }
   static void TearDownTestSuite() {
     delete shared_dir;
     shared_dir = nullptr;
+    delete session;
+    session = nullptr;
   }
-  static std::filesystem::path Folder() { return shared_dir->path() / "shoe"; }
+  // The shared session: read only.
+  static const std::filesystem::path& Folder() { return *session; }
   // A copy of the session to modify.
   static std::filesystem::path Copy(const std::string& name) {
     auto to = shared_dir->path() / name;
@@ -59,6 +66,7 @@ class TextureSessionTest : public ::testing::Test {
     return options;
   }
   static inline TempDir* shared_dir = nullptr;
+  static inline std::filesystem::path* session = nullptr;
 };
 
 // Replaces the session's silhouettes by the simulator's exact ones.

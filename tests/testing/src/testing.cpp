@@ -1,10 +1,19 @@
 #include "carousel/testing/testing.h"
 
+#include <fcntl.h>
 #include <stdlib.h>
+#include <sys/file.h>
+#include <unistd.h>
 
+#include <cerrno>
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
+#include <map>
+#include <memory>
+#include <mutex>
 #include <sstream>
+#include <stdexcept>
 
 #include <gtest/gtest.h>
 
@@ -42,6 +51,63 @@ std::filesystem::path SharedDataFile(const std::string& relative) {
     throw std::runtime_error("shared test data file missing: " + path.string());
   }
   return path;
+}
+
+namespace {
+
+// An exclusive flock on a file, released (and the descriptor closed) on scope exit.
+class FileLock {
+ public:
+  explicit FileLock(const std::filesystem::path& path)
+      : fd_(::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644)) {
+    if (fd_ < 0 || ::flock(fd_, LOCK_EX) != 0)
+      throw std::runtime_error("cannot lock " + path.string() + ": " + std::strerror(errno));
+  }
+  ~FileLock() {
+    ::flock(fd_, LOCK_UN);
+    ::close(fd_);
+  }
+  FileLock(const FileLock&) = delete;
+  FileLock& operator=(const FileLock&) = delete;
+
+ private:
+  int fd_;
+};
+
+}  // namespace
+
+std::filesystem::path SharedFixture(const std::string& key,
+                                    const std::function<void(const std::filesystem::path&)>& make) {
+  static std::mutex mutex;
+  const std::lock_guard<std::mutex> guard(mutex);
+  const char* env = std::getenv("CAROUSEL_TEST_CACHE_DIR");
+  if (env == nullptr || *env == '\0') {
+    // This process only: made once, removed at exit.
+    static std::map<std::string, std::unique_ptr<TempDir>> own;
+    auto& dir = own[key];
+    if (dir == nullptr) {
+      auto made = std::make_unique<TempDir>();
+      make(made->path() / key);
+      dir = std::move(made);
+    }
+    return dir->path() / key;
+  }
+  const std::filesystem::path root = env;
+  std::filesystem::create_directories(root);
+  const std::filesystem::path folder = root / key;
+  const std::filesystem::path complete = root / (key + ".complete");
+  const FileLock lock(root / (key + ".lock"));
+  if (std::filesystem::exists(complete)) return folder;
+  std::filesystem::remove_all(folder);
+  try {
+    make(folder);
+  } catch (...) {
+    std::error_code ec;
+    std::filesystem::remove_all(folder, ec);
+    throw;
+  }
+  WriteBytes(complete, key + "\n");
+  return folder;
 }
 
 std::filesystem::path BinDir() {

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <filesystem>
+#include <functional>
 #include <random>
 #include <string>
 
@@ -35,6 +36,15 @@ class TempDir {
 std::filesystem::path SharedDataDir();
 // SharedDataDir() / relative, after asserting that the file exists.
 std::filesystem::path SharedDataFile(const std::string& relative);
+
+// A folder made once per CTest run and shared by every test process that asks for it by key
+// (a simulated session, say, that several tests start from). The first to ask runs make(folder)
+// while holding a lock; the others wait and get the same folder. Tests must treat it as read
+// only (copy it to change it). CTest points $CAROUSEL_TEST_CACHE_DIR at a folder it empties at
+// the start of each run, so nothing outlives the run; without it (a test binary run by hand)
+// each process makes its own in a temporary folder. A make() that throws leaves nothing behind.
+std::filesystem::path SharedFixture(const std::string& key,
+                                    const std::function<void(const std::filesystem::path&)>& make);
 
 // The folder holding the `carousel` executable of this build ($CAROUSEL_BIN_DIR overrides).
 std::filesystem::path BinDir();
