@@ -11,7 +11,6 @@
 #   carousel_add_executable(NAME SOURCES src... [PRIVATE_LINKS targets...] [OUTPUT_NAME name])
 #   carousel_add_test(NAME SOURCES src... [LINKS targets...] LABELS unit|integration|e2e
 #       [TIMEOUT seconds])          # one GoogleTest binary, each test registered with CTest
-#   carousel_sanitize_unoptimized(TARGET)   # Sanitize build: -O0 instead of -O1 (see below)
 include_guard(GLOBAL)
 include(GoogleTest)
 
@@ -41,14 +40,6 @@ function(_carousel_apply_defaults target)
       CXX_CLANG_TIDY "${CAROUSEL_CLANG_TIDY_EXE};--quiet"
       C_CLANG_TIDY "${CAROUSEL_CLANG_TIDY_EXE};--quiet")
   endif()
-endfunction()
-
-# In the Sanitize build, code that computes little (the tests, the command-line front end) is
-# compiled at -O0, still fully instrumented: GCC compiles it in half the time of -O1 under
-# ASan + UBSan (json_test.cpp: 15 s against 33 s), a third of that build. The libraries that
-# compute (images, meshes, solvers) keep -O1 so that the tests run in reasonable time.
-function(carousel_sanitize_unoptimized target)
-  target_compile_options(${target} PRIVATE $<$<CONFIG:Sanitize>:-O0>)
 endfunction()
 
 function(carousel_add_library name)
@@ -105,7 +96,6 @@ function(carousel_add_test name)
   target_link_libraries(${name} PRIVATE carousel_testing ${ARG_LINKS} GTest::gmock GTest::gtest_main)
   set_target_properties(${name} PROPERTIES RUNTIME_OUTPUT_DIRECTORY "${CMAKE_BINARY_DIR}/tests")
   _carousel_apply_defaults(${name})
-  carousel_sanitize_unoptimized(${name})
   gtest_discover_tests(${name}
     DISCOVERY_MODE PRE_TEST
     # Listing takes 0.4 s, but a loaded 2-core CI machine once exceeded CMake's 5 s default.

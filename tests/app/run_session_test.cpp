@@ -131,12 +131,13 @@ TEST(RunSessionTest, ResumesAfterSigkillAtTenMomentsWithTheSamePhotosAndNoDuplic
     return manifest.find(text) != std::string::npos;
   };
 #if defined(CAROUSEL_SANITIZE_BUILD)
-  // Under the sanitizers (10x slower) every other moment: still capture, reconstruct, texture.
+  // Under the sanitizers (10x slower) every other moment: start-up, capture, reconstruct (twice)
+  // and the texture stage's start still land where they do in the Release build.
   constexpr int kStep = 2;
 #else
   constexpr int kStep = 1;
 #endif
-  for (int k = 1 % kStep; k < 10; k += kStep) {
+  for (int k = 0; k < 10; k += kStep) {
     const auto out = dir / ("run" + std::to_string(k));
     const auto session = out / "kill-test";
     // Each kill waits for a moment of the run (start-up, photos on disk, masks being written,
