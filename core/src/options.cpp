@@ -1,43 +1,42 @@
 #include "carousel/core/options.h"
 
+#include <array>
+#include <charconv>
 #include <cmath>
-#include <sstream>
 
 #include "carousel/core/error.h"
 
 namespace carousel {
 namespace {
 
-// 4096, 0.5, 1e-06: the shortest form that reads back as the value.
-std::string Number(double value) {
-  std::ostringstream text;
-  text.precision(15);
-  text << value;
-  return text.str();
-}
-
 std::string UnitSuffix(const OptionInfo& info) { return info.unit.empty() ? "" : " " + info.unit; }
 
 }  // namespace
+
+std::string OptionNumberText(double value) {
+  std::array<char, 32> text{};
+  const auto end = std::to_chars(text.data(), text.data() + text.size(), value).ptr;
+  return std::string(text.data(), end);
+}
 
 std::string OptionInfo::RangeText() const {
   const bool low = std::isfinite(min), high = std::isfinite(max);
   std::string text;
   if (low && high) {
     if (!min_exclusive && !max_exclusive) {
-      text = Number(min) + ".." + Number(max);
+      text = OptionNumberText(min) + ".." + OptionNumberText(max);
     } else {
-      text = std::string(min_exclusive ? "(" : "[") + Number(min) + ", " + Number(max) +
-             (max_exclusive ? ")" : "]");
+      text = std::string(min_exclusive ? "(" : "[") + OptionNumberText(min) + ", " +
+             OptionNumberText(max) + (max_exclusive ? ")" : "]");
     }
   } else if (low) {
-    text = std::string(min_exclusive ? "> " : ">= ") + Number(min);
+    text = std::string(min_exclusive ? "> " : ">= ") + OptionNumberText(min);
   } else if (high) {
-    text = std::string(max_exclusive ? "< " : "<= ") + Number(max);
+    text = std::string(max_exclusive ? "< " : "<= ") + OptionNumberText(max);
   }
   if (!text.empty()) text += UnitSuffix(*this);
   if (special) {
-    text += (text.empty() ? "" : ", or ") + Number(*special);
+    text += (text.empty() ? "" : ", or ") + OptionNumberText(*special);
     if (!special_meaning.empty()) text += " = " + special_meaning;
   }
   return text;
@@ -54,7 +53,7 @@ bool OptionInfo::Allows(double value) const {
 void CheckOptionValue(const OptionInfo& info, double value) {
   if (info.Allows(value)) return;
   throw InvalidArgument("--" + info.name + " must be " + info.RangeText() + ", got " +
-                        Number(value));
+                        OptionNumberText(value));
 }
 
 void CheckOptionChoice(const OptionInfo& info, const std::string& value) {

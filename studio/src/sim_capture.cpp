@@ -1,7 +1,5 @@
 #include "carousel/studio/sim_capture.h"
 
-#include <array>
-#include <charconv>
 #include <cmath>
 #include <map>
 #include <numbers>
@@ -150,13 +148,7 @@ const OptionTable<SimCaptureOptions>& SimCaptureOptions::Fields() {
           [](O& o) -> OptionRef { return &o.placement.scale; });
     t.AddText(
         {.name = "yaw-deg", .help = "turn the model on the plate first", .unit = "deg"},
-        [](const O& o) {
-          // The shortest text that reads back to the same number ("0", "22.5").
-          std::array<char, 32> text{};
-          const double deg = o.placement.yaw_rad * 180.0 / std::numbers::pi;
-          const auto end = std::to_chars(text.data(), text.data() + text.size(), deg).ptr;
-          return std::string(text.data(), end);
-        },
+        [](const O& o) { return OptionNumberText(o.placement.yaw_rad * 180.0 / std::numbers::pi); },
         [](O& o, const std::string& text) {
           try {
             std::size_t used = 0;

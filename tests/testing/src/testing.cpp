@@ -60,8 +60,10 @@ class FileLock {
  public:
   explicit FileLock(const std::filesystem::path& path)
       : fd_(::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644)) {
-    if (fd_ < 0 || ::flock(fd_, LOCK_EX) != 0)
-      throw std::runtime_error("cannot lock " + path.string() + ": " + std::strerror(errno));
+    if (fd_ >= 0 && ::flock(fd_, LOCK_EX) == 0) return;
+    const std::string reason = std::strerror(errno);
+    if (fd_ >= 0) ::close(fd_);
+    throw std::runtime_error("cannot lock " + path.string() + ": " + reason);
   }
   ~FileLock() {
     ::flock(fd_, LOCK_UN);

@@ -36,6 +36,10 @@
 
 namespace carousel {
 
+// A number as option text: the shortest form that reads back as the same double ("4096",
+// "0.5", "1e-06", "22.5"), for ranges, defaults and the option values files record.
+std::string OptionNumberText(double value);
+
 // What a field means to a person, and the values it may take.
 struct OptionInfo {
   std::string name;  // flag name without dashes, e.g. "faces"
