@@ -11,6 +11,7 @@
 #include <gtest/gtest.h>
 
 #include "carousel/core/error.h"
+#include "carousel/core/mesh_io.h"
 #include "carousel/testing/testing.h"
 #include "carousel/texture/export.h"
 #include "carousel/texture/textured_model.h"
@@ -213,6 +214,34 @@ TEST(HeldOutTest, TheGlbReadBackRendersLikeTheMeshItCameFrom) {
   ASSERT_GE(top, 0);
   const int middle = a.image.cols / 2;
   EXPECT_GT(a.image.at<cv::Vec3b>(top + 5, middle)[2], 250);
+}
+
+// The OBJ is Y-up by default (Blender, MeshLab): the quad, standing from z = 0 to 0.15 in the
+// turntable frame, stands from y = 0 to 0.15 in the file; --obj-up z keeps the turntable frame.
+TEST(HeldOutTest, TheObjIsYUpUnlessAskedForTheTurntableFrame) {
+  const Mesh mesh = TexturedQuadMesh();
+  const cv::Mat texture = Pattern(64, 64);
+  TempDir dir;
+  const auto heights = [&](ExportOptions::Up up, int axis) {
+    ExportOptions options;
+    options.obj_up = up;
+    const ExportResult files = ExportTexturedModel(mesh, texture, dir.path(), options);
+    const Mesh obj = ReadMesh(files.obj);
+    double lo = 1e9, hi = -1e9;
+    for (const auto v : obj.vertices()) {
+      lo = std::min(lo, obj.point(v)[axis]);
+      hi = std::max(hi, obj.point(v)[axis]);
+    }
+    return std::make_pair(lo, hi);
+  };
+  const auto [y_lo, y_hi] = heights(ExportOptions::Up::kY, 1);
+  EXPECT_NEAR(y_lo, 0.0, 1e-6);
+  EXPECT_NEAR(y_hi, 0.15, 1e-6);
+  const auto [z_lo, z_hi] = heights(ExportOptions::Up::kZ, 2);
+  EXPECT_NEAR(z_lo, 0.0, 1e-6);
+  EXPECT_NEAR(z_hi, 0.15, 1e-6);
+  ExportOptions bad;
+  EXPECT_THROW(ExportOptions::Fields().Find("obj-up").text_set(bad, "x"), InvalidArgument);
 }
 
 TEST(HeldOutTest, ReadingABadFileNamesIt) {

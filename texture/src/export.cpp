@@ -97,6 +97,10 @@ const OptionTable<ExportOptions>& ExportOptions::Fields() {
                                 .min = 0,
                                 .max = 9,
                                 .advanced = true});
+    t.AddChoice(&O::obj_up,
+                {.name = "obj-up",
+                 .help = "the OBJ's up axis: y (Blender, MeshLab) or z (the turntable frame)"},
+                {{"y", ExportOptions::Up::kY}, {"z", ExportOptions::Up::kZ}});
     return t;
   }();
   return table;
@@ -142,11 +146,16 @@ ExportResult ExportTexturedModel(const Mesh& mesh, const cv::Mat& texture,
     std::ostringstream obj;
     obj.precision(9);
     obj << "# Carousel textured model: " << mesh.n_vertices() << " vertices, " << mesh.n_faces()
-        << " faces\n"
+        << " faces, metres, "
+        << (options.obj_up == ExportOptions::Up::kY ? "+Y up (turntable +Z)" : "+Z up (turntable)")
+        << "\n"
         << "mtllib " << result.mtl.filename().string() << "\n";
     for (const auto v : mesh.vertices()) {
       const auto& p = mesh.point(v);
-      obj << "v " << p[0] << ' ' << p[1] << ' ' << p[2] << '\n';
+      if (options.obj_up == ExportOptions::Up::kY)
+        obj << "v " << p[0] << ' ' << p[2] << ' ' << -p[1] << '\n';
+      else
+        obj << "v " << p[0] << ' ' << p[1] << ' ' << p[2] << '\n';
     }
     std::map<std::pair<double, double>, int> uv_index;
     std::vector<std::array<int, 3>> face_uv;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <limits>
 
 #include <tiny_gltf.h>
 #include <Eigen/Geometry>
@@ -275,16 +276,12 @@ TexturedModel TexturedModelFromMesh(const Mesh& mesh, const cv::Mat& texture) {
   return model;
 }
 
-TexturedModel ReadTexturedModel(const std::filesystem::path& path) {
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) throw IoError(path, "no such file");
-  tinygltf::TinyGLTF loader;
-  tinygltf::Model gltf;
-  std::string error, warning;
-  const bool binary = path.extension() != ".gltf";
-  const bool ok = binary ? loader.LoadBinaryFromFile(&gltf, &error, &warning, path.string())
-                         : loader.LoadASCIIFromFile(&gltf, &error, &warning, path.string());
+namespace {
+
+TexturedModel CheckedModel(const std::filesystem::path& path, bool ok, const std::string& error_in,
+                           const tinygltf::Model& gltf) {
   if (!ok) {
+    std::string error = error_in;
     std::replace(error.begin(), error.end(), '\n', ' ');
     throw FormatError(path, error.empty() ? "not a glTF file tinygltf can read" : error);
   }
@@ -297,6 +294,32 @@ TexturedModel ReadTexturedModel(const std::filesystem::path& path) {
   for (const Eigen::Vector2f& uv : model.uvs)
     if (!uv.allFinite()) throw FormatError(path, "a texture coordinate is not finite");
   return model;
+}
+
+}  // namespace
+
+TexturedModel ReadTexturedModel(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) throw IoError(path, "no such file");
+  tinygltf::TinyGLTF loader;
+  tinygltf::Model gltf;
+  std::string error, warning;
+  const bool binary = path.extension() != ".gltf";
+  const bool ok = binary ? loader.LoadBinaryFromFile(&gltf, &error, &warning, path.string())
+                         : loader.LoadASCIIFromFile(&gltf, &error, &warning, path.string());
+  return CheckedModel(path, ok, error, gltf);
+}
+
+TexturedModel ReadTexturedModelFromGlb(const std::vector<unsigned char>& glb,
+                                       const std::filesystem::path& name) {
+  if (glb.size() > std::numeric_limits<unsigned int>::max())
+    throw FormatError(name, "larger than 4 GiB");
+  tinygltf::TinyGLTF loader;
+  tinygltf::Model gltf;
+  std::string error, warning;
+  const bool ok = loader.LoadBinaryFromMemory(&gltf, &error, &warning, glb.data(),
+                                              static_cast<unsigned int>(glb.size()), "");
+  return CheckedModel(name, ok, error, gltf);
 }
 
 }  // namespace carousel::texture

@@ -1,8 +1,9 @@
 // Export of a textured model (texture paper's output): OBJ + MTL + PNG texture (OBJ's v-up
-// UVs), and a glTF 2.0 binary (GLB, through Debian's tinygltf) with the texture embedded as
-// PNG or JPEG, v flipped to glTF's top-left origin. Vertices are split where a chart seam
-// gives one position two UVs (glTF needs one UV per vertex). Every file is written
-// atomically; nothing is written outside `folder`.
+// UVs; positions Y-up by default, as Blender and MeshLab read OBJ: turntable (x, y, z) is
+// written as (x, z, -y); `obj_up = kZ` writes the turntable frame as it is), and a glTF 2.0 binary
+// (GLB, through Debian's tinygltf) with the texture embedded as PNG or JPEG, v flipped to glTF's
+// top-left origin. Vertices are split where a chart seam gives one position two UVs (glTF needs one
+// UV per vertex). Every file is written atomically; nothing is written outside `folder`.
 #pragma once
 
 #include <filesystem>
@@ -16,11 +17,13 @@
 namespace carousel::texture {
 
 struct ExportOptions {
+  enum class Up { kY, kZ };
   std::string name = "model";  // file stem: model.obj, model.mtl, model.png, model.glb
   bool glb = true;
   bool jpeg_in_glb = false;  // the GLB's texture as JPEG (smaller) instead of PNG
   int jpeg_quality = 92;     // 1..100
   int png_compression = 3;   // 0..9
+  Up obj_up = Up::kY;        // the OBJ's up axis (the GLB is always glTF's +Y up)
   // The description of every field above (core/options.h): flags, widgets, range checks.
   static const OptionTable<ExportOptions>& Fields();
   void Validate() const;

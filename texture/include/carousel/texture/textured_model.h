@@ -46,4 +46,9 @@ TexturedModel TexturedModelFromMesh(const Mesh& mesh, const cv::Mat& texture);
 // another shape, the unsupported feature.
 TexturedModel ReadTexturedModel(const std::filesystem::path& path);
 
+// The same from a GLB in memory (what publish/ decodes a compressed file into); `name` is the
+// file the bytes came from, for messages. \throw FormatError naming it.
+TexturedModel ReadTexturedModelFromGlb(const std::vector<unsigned char>& glb,
+                                       const std::filesystem::path& name);
+
 }  // namespace carousel::texture
