@@ -1,0 +1,41 @@
+// The viewer page of a product, model/index.html: Google's <model-viewer> showing the web GLB
+// (orbit, zoom, auto-rotate, the poster while it loads, AR on phones that offer it), with the
+// scripts it needs copied beside it from the web packages (web/package.json: the model-viewer
+// bundle with three.js inside, and meshoptimizer's decoder, which model-viewer would otherwise
+// fetch from a CDN). The folder works offline from any static host.
+#pragma once
+
+#include <filesystem>
+#include <string>
+
+namespace carousel::publish {
+
+// The installed web packages' files a page ships with.
+struct WebRuntime {
+  std::filesystem::path model_viewer;     // model-viewer.min.js
+  std::filesystem::path meshopt_decoder;  // the decoder as a classic script (sets MeshoptDecoder)
+};
+
+// From $CAROUSEL_WEB_MODULES, else the node_modules folder scripts/install-deps fills.
+// \throw IoError naming the missing file and how to install it.
+WebRuntime FindWebRuntime();
+
+struct ViewerPageOptions {
+  std::string title;                    // the product's name (escaped for HTML)
+  std::string glb = "model.web.glb";    // relative to the page
+  std::string poster;                   // relative image shown while loading; empty: none
+  bool auto_rotate = true;
+};
+
+// The page's HTML.
+std::string ViewerPageHtml(const ViewerPageOptions& options);
+
+// Writes `folder`/index.html and copies the runtime's scripts beside it (each file atomically;
+// a script already there with the same bytes is left alone). \throw IoError naming the file.
+void WriteViewerPage(const std::filesystem::path& folder, const ViewerPageOptions& options,
+                     const WebRuntime& runtime);
+
+// `text` with &, <, >, " and ' escaped for HTML text and attribute values.
+std::string EscapeHtml(const std::string& text);
+
+}  // namespace carousel::publish
