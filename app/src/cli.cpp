@@ -24,10 +24,13 @@ constexpr CommandGroup kCommands[] = {
      AddReconstructCommand},
     {"texture", "texture atlas and texture map of a session's mesh", AddTextureCommands},
     {"process",
-     "the processing stages (reconstruct, texture) of one or more sessions, each skipped when "
-     "its outputs are current",
+     "the processing stages (reconstruct, texture, publish) of one or more sessions, each "
+     "skipped when its outputs are current",
      AddProcessCommand},
-    {"run", "the one-button session: capture, reconstruct, texture, export", AddRunCommand},
+    {"publish", "the web GLB (meshopt, JPEG), poster and viewer page of textured sessions",
+     AddPublishCommand},
+    {"run", "the one-button session: capture, reconstruct, texture, export, publish",
+     AddRunCommand},
     {"turntable", "identify, home, move, trigger and configure the turntable controller",
      AddTurntableCommand},
     {"camera", "list, inspect, configure and fire cameras (libgphoto2: USB or ptpip:)",

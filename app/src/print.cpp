@@ -53,6 +53,21 @@ void PrintTexture(const std::filesystem::path& session, const studio::TextureSes
         << r.mean_ssim << "\n";
 }
 
+void PrintPublish(const std::filesystem::path& session, const studio::PublishSessionResult& r,
+                  std::ostream& out) {
+  const auto model = session / "model";
+  out << std::fixed << std::setprecision(2) << "web GLB " << (model / "model.web.glb").string()
+      << ": " << static_cast<double>(r.web.bytes) / 1e6 << " MB (texture " << r.web.texture_size
+      << "^2 JPEG " << static_cast<double>(r.web.texture_bytes) / 1e6 << " MB, geometry "
+      << static_cast<double>(r.web.geometry_bytes) / 1e3 << " kB of "
+      << static_cast<double>(r.web.geometry_raw_bytes) / 1e3 << " kB); lossless GLB "
+      << static_cast<double>(r.lossless_bytes) / 1e6 << " MB\n";
+  if (!r.held_out_web.empty())
+    out << "held-out mean PSNR: web " << r.mean_psnr_web_db << " dB, lossless "
+        << r.mean_psnr_lossless_db << " dB\n";
+  out << "viewer page: " << (model / "index.html").string() << "\n";
+}
+
 void PrintCalibration(const studio::CalibrateSessionResult& r, std::ostream& out) {
   const calib::RigCalibration& c = r.result.calibration;
   int used = 0;

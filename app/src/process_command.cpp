@@ -14,6 +14,11 @@ struct ReconstructArgs {
   std::filesystem::path session;
 };
 
+struct PublishArgs {
+  std::vector<std::filesystem::path> sessions;
+  studio::PublishSessionOptions options;
+};
+
 struct ProcessArgs {
   std::vector<std::filesystem::path> sessions;
   studio::ProcessOptions options;
@@ -39,6 +44,11 @@ int RunProcess(const ProcessArgs& args, Io& io) {
         PrintTexture(session, *result.texture, io.out);
       } else {
         io.out << "texture: current, skipped\n";
+      }
+      if (result.publish) {
+        PrintPublish(session, *result.publish, io.out);
+      } else if (result.publish_reason == "current") {
+        io.out << "publish: current, skipped\n";
       }
     } catch (const std::exception& e) {
       io.err << "carousel process: " << session.string() << ": error: " << e.what() << '\n';
@@ -79,7 +89,34 @@ void AddProcessCommand(CLI::App& command, Dispatch& dispatch) {
                  studio::ReconstructOptions::Fields().Only({"faces"}));
   AddOptionFlags(&command, args->options.texture,
                  studio::TextureSessionOptions::Fields().Only({"exclude-views"}));
+  command.add_flag(
+      "--no-publish", [args](std::int64_t) { args->options.publish_model = false; },
+      "stop after the texture stage (no web GLB, no viewer page)");
   dispatch.On(&command, [args](Io& io) { return RunProcess(*args, io); });
+}
+
+void AddPublishCommand(CLI::App& command, Dispatch& dispatch) {
+  auto args = std::make_shared<PublishArgs>();
+  command.add_option("sessions", args->sessions, "session folders with a textured model")
+      ->required();
+  AddOptionFlags(&command, args->options, studio::PublishSessionOptions::Fields());
+  dispatch.On(&command, [args](Io& io) {
+    int status = kExitOk;
+    for (const std::filesystem::path& session : args->sessions) {
+      try {
+        CliProgress cli(io.err);
+        PrintPublish(session,
+                     studio::PublishSession(session, studio::ReadSession(session), args->options,
+                                            cli.progress()),
+                     io.out);
+      } catch (const std::exception& e) {
+        io.err << "carousel publish: " << session.string() << ": error: " << e.what() << '\n';
+        if (status == kExitOk) status = ExitCodeFor(e);
+        if (dynamic_cast<const Cancelled*>(&e)) break;
+      }
+    }
+    return status;
+  });
 }
 
 }  // namespace carousel::app

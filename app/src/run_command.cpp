@@ -77,6 +77,7 @@ int RunOneButton(RunArgs& args, Io& io) {
     io.out << std::fixed << std::setprecision(1) << "trigger skew between cameras: at most "
            << result.max_trigger_skew_ms << " ms\n";
   if (result.textured) PrintTexture(result.session, result.texture, io.out);
+  if (result.publish) PrintPublish(result.session, *result.publish, io.out);
   const auto model = result.session / "model";
   io.out << "model: " << (model / "model.obj").string() << " (+ model.mtl, model.png), "
          << (model / "model.glb").string() << "\n";

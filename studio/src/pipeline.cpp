@@ -17,6 +17,7 @@ namespace {
 
 constexpr const char* kReconstruct = "reconstruct";
 constexpr const char* kTexture = "texture";
+constexpr const char* kPublish = "publish";
 
 // Writes "name=value;" with doubles at full precision, so any change of a value shows.
 class Describer {
@@ -85,6 +86,12 @@ std::string Describe(const TextureSessionOptions& o) {
       .str();
 }
 
+std::string Describe(const PublishSessionOptions& o) {
+  return Describer()("web_size", o.web.max_texture_size)("web_quality", o.web.jpeg_quality)(
+             "unlit", o.web.unlit)("meshopt", o.web.compress)("poster", o.poster_size)
+      .str();
+}
+
 bool AllExist(const std::filesystem::path& folder, const std::vector<std::string>& files) {
   for (const std::string& f : files) {
     if (!std::filesystem::is_regular_file(folder / f)) return false;
@@ -115,6 +122,7 @@ void RecordInputs(const std::filesystem::path& folder, Session& session, const c
 void ProcessOptions::Validate() const {
   reconstruct.Validate();
   texture.Validate();
+  publish.Validate();
 }
 
 std::string ReconstructFingerprint(const std::filesystem::path& folder,
@@ -192,6 +200,28 @@ ProcessResult ProcessSession(const std::filesystem::path& folder, Session& sessi
     result.seconds_texture = watch.ElapsedSeconds();
   } else {
     result.texture_reason = "current";
+  }
+  if (!options.publish_model || !options.texture.output.glb ||
+      options.texture.output.name != "model")
+    return result;
+  const std::string publish_inputs =
+      Sha256(texture_inputs + '\n' + FileSha256(folder / (stem + ".glb")) + '\n' +
+             Describe(options.publish));
+  result.publish_reason =
+      (options.force || result.texture)
+          ? (options.force ? "forced" : "the texture ran")
+          : Staleness(session, kPublish, publish_inputs,
+                      AllExist(folder, {"model/model.web.glb", "model/index.html",
+                                        "model/poster.jpg", "model/publish.json"}));
+  if (!result.publish_reason.empty()) {
+    CAROUSEL_LOG_INFO(folder.string() << ": publish runs (" << result.publish_reason << ")");
+    Stopwatch watch;
+    result.publish = PublishSession(folder, session, options.publish, progress);
+    session.stages[kPublish] = "done";
+    RecordInputs(folder, session, kPublish, publish_inputs);
+    result.seconds_publish = watch.ElapsedSeconds();
+  } else {
+    result.publish_reason = "current";
   }
   return result;
 }

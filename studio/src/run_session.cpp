@@ -144,6 +144,7 @@ RunResult Continue(const std::filesystem::path& folder, const RunOptions& option
   result.reconstructed = processed.reconstruct.has_value();
   result.textured = processed.texture.has_value();
   if (processed.texture) result.texture = *processed.texture;
+  result.publish = processed.publish;
   result.seconds_reconstruct = processed.seconds_reconstruct;
   result.seconds_texture = processed.seconds_texture;
   return result;

@@ -9,7 +9,9 @@
 //   reconstruct: every photo's SHA-256, camera model and table angle, the session frame and
 //                every reconstruct option;
 //   texture:     the reconstruct fingerprint, the SHA-256 of recon/mesh.ply and every
-//                texture option.
+//                texture option;
+//   publish:     the texture fingerprint, the SHA-256 of model/model.glb and every publish
+//                option (publish_session.h; off with publish_model = false).
 // A photo retaken, a camera recalibrated, a mesh edited or an option changed therefore reruns
 // exactly the stages that depend on it. The fingerprint is recorded only after the stage's own
 // manifest update, so a stage killed half-way is never taken for current.
@@ -20,6 +22,7 @@
 #include <string>
 
 #include "carousel/core/progress.h"
+#include "carousel/studio/publish_session.h"
 #include "carousel/studio/reconstruct.h"
 #include "carousel/studio/texture_session.h"
 
@@ -28,16 +31,19 @@ namespace carousel::studio {
 struct ProcessOptions {
   ReconstructOptions reconstruct;
   TextureSessionOptions texture;
-  bool force = false;  // run every stage even when current
+  PublishSessionOptions publish;
+  bool publish_model = true;  // the publish stage (web GLB, viewer page) after texture
+  bool force = false;         // run every stage even when current
   void Validate() const;
 };
 
 struct ProcessResult {
   std::optional<ReconstructResult> reconstruct;  // set when the stage ran
   std::optional<TextureSessionResult> texture;   // set when the stage ran
+  std::optional<PublishSessionResult> publish;   // set when the stage ran
   std::string reconstruct_reason;                // why it ran (or "current")
-  std::string texture_reason;
-  double seconds_reconstruct = 0.0, seconds_texture = 0.0;
+  std::string texture_reason, publish_reason;
+  double seconds_reconstruct = 0.0, seconds_texture = 0.0, seconds_publish = 0.0;
 };
 
 // \throw what ReconstructSession and TextureSession throw (IoError/FormatError naming the

@@ -19,6 +19,7 @@
 #include "carousel/core/progress.h"
 #include "carousel/studio/calibrate_session.h"
 #include "carousel/studio/checksum.h"
+#include "carousel/studio/publish_session.h"
 #include "carousel/studio/reconstruct.h"
 #include "carousel/studio/rig_config.h"
 #include "carousel/studio/sim_capture.h"
@@ -57,6 +58,7 @@ struct RunResult {
   double max_trigger_skew_ms = 0.0;  // largest spread of the cameras' triggers at a stop
   bool reconstructed = false, textured = false;  // stages run (not skipped) this time
   TextureSessionResult texture;
+  std::optional<PublishSessionResult> publish;        // the publish stage, when it ran
   std::optional<CalibrateSessionResult> calibration;  // calibration sessions, when it ran
   double seconds_capture = 0.0, seconds_reconstruct = 0.0, seconds_texture = 0.0;
 };
