@@ -15,8 +15,8 @@ constexpr const char* kDecoderFile = "meshopt_decoder.js";
 void CopyIfDifferent(const std::filesystem::path& from, const std::filesystem::path& to) {
   const std::vector<std::uint8_t> bytes = ReadFileBytes(from);
   std::error_code ec;
-  if (std::filesystem::is_regular_file(to, ec) && std::filesystem::file_size(to, ec) == bytes.size() &&
-      ReadFileBytes(to) == bytes)
+  if (std::filesystem::is_regular_file(to, ec) &&
+      std::filesystem::file_size(to, ec) == bytes.size() && ReadFileBytes(to) == bytes)
     return;
   WriteFileAtomic(to, std::span<const std::uint8_t>(bytes.data(), bytes.size()));
 }
@@ -25,9 +25,9 @@ void CopyIfDifferent(const std::filesystem::path& from, const std::filesystem::p
 
 WebRuntime FindWebRuntime() {
   const char* env = std::getenv("CAROUSEL_WEB_MODULES");
-  const std::filesystem::path modules =
-      env != nullptr && *env != '\0' ? std::filesystem::path(env)
-                                     : std::filesystem::path(CAROUSEL_DEFAULT_WEB_MODULES);
+  const std::filesystem::path modules = env != nullptr && *env != '\0'
+                                            ? std::filesystem::path(env)
+                                            : std::filesystem::path(CAROUSEL_DEFAULT_WEB_MODULES);
   WebRuntime runtime;
   runtime.model_viewer = modules / "@google/model-viewer/dist" / kModelViewerFile;
   // The UMD build: a classic script that sets self.MeshoptDecoder, as model-viewer loads it.
@@ -46,12 +46,23 @@ std::string EscapeHtml(const std::string& text) {
   std::string out;
   for (const char c : text) {
     switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      case '\'': out += "&#39;"; break;
-      default: out += c;
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      case '\'':
+        out += "&#39;";
+        break;
+      default:
+        out += c;
     }
   }
   return out;
@@ -66,7 +77,8 @@ std::string ViewerPageHtml(const ViewerPageOptions& options) {
 <meta charset="utf-8">
 <meta name="viewport" content="width=device-width, initial-scale=1">
 <meta name="generator" content="Carousel">
-<title>)" << title << R"(</title>
+<title>)"
+       << title << R"(</title>
 <style>
   html, body { margin: 0; height: 100%; background: #fff; font-family: system-ui, sans-serif; }
   body { display: flex; flex-direction: column; }
@@ -78,13 +90,17 @@ std::string ViewerPageHtml(const ViewerPageOptions& options) {
      location is set (it has no default); the decoder ships beside the page, for offline use. -->
 <script>
   self.ModelViewerElement = self.ModelViewerElement || {};
-  self.ModelViewerElement.meshoptDecoderLocation = ')" << kDecoderFile << R"(';
+  self.ModelViewerElement.meshoptDecoderLocation = ')"
+       << kDecoderFile << R"(';
 </script>
-<script type="module" src=")" << kModelViewerFile << R"("></script>
+<script type="module" src=")"
+       << kModelViewerFile << R"("></script>
 </head>
 <body>
-<h1>)" << title << R"(</h1>
-<model-viewer src=")" << EscapeHtml(options.glb) << '"';
+<h1>)" << title
+       << R"(</h1>
+<model-viewer src=")"
+       << EscapeHtml(options.glb) << '"';
   if (!options.poster.empty()) html << " poster=\"" << EscapeHtml(options.poster) << '"';
   html << " alt=\"" << title << "\"";
   html << R"( camera-controls touch-action="pan-y")";

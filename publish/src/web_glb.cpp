@@ -20,7 +20,7 @@ namespace {
 using Json = nlohmann::ordered_json;
 using Bytes = std::vector<unsigned char>;
 
-constexpr std::uint32_t kGlbMagic = 0x46546C67;  // "glTF"
+constexpr std::uint32_t kGlbMagic = 0x46546C67;   // "glTF"
 constexpr std::uint32_t kJsonChunk = 0x4E4F534A;  // "JSON"
 constexpr std::uint32_t kBinChunk = 0x004E4942;   // "BIN\0"
 constexpr const char* kMeshopt = "EXT_meshopt_compression";
@@ -72,7 +72,7 @@ Bytes AssembleGlb(const Json& json, const Bytes& bin) {
 // One stream of the geometry: its raw bytes and how the glTF bufferView describes it.
 struct Stream {
   Bytes raw;
-  std::size_t count = 0;  // elements
+  std::size_t count = 0;   // elements
   std::size_t stride = 0;  // bytes per element
   bool indices = false;
   int target = 0;
@@ -123,9 +123,10 @@ const OptionTable<WebGlbOptions>& WebGlbOptions::Fields() {
                                  .unit = "texels",
                                  .min = 64,
                                  .max = 16384});
-    t.Add(&O::jpeg_quality,
-          {.name = "web-jpeg-quality", .help = "JPEG quality of the web GLB's texture", .min = 1,
-           .max = 100});
+    t.Add(&O::jpeg_quality, {.name = "web-jpeg-quality",
+                             .help = "JPEG quality of the web GLB's texture",
+                             .min = 1,
+                             .max = 100});
     t.Add(&O::unlit, {.name = "web-unlit",
                       .help = "the web GLB's material unlit (the photos' own light); off: PBR",
                       .negative_name = "web-lit"});
@@ -209,8 +210,8 @@ std::vector<unsigned char> EncodeWebGlb(const texture::TexturedModel& model,
   streams[2].target = 34963;  // ELEMENT_ARRAY_BUFFER
 
   // The texture.
-  r.texture_size = WebTextureSize(std::max(model.texture.cols, model.texture.rows),
-                                  options.max_texture_size);
+  r.texture_size =
+      WebTextureSize(std::max(model.texture.cols, model.texture.rows), options.max_texture_size);
   Bytes jpeg;
   if (!cv::imencode(".jpg", WebTexture(model.texture, r.texture_size), jpeg,
                     {cv::IMWRITE_JPEG_QUALITY, options.jpeg_quality, cv::IMWRITE_JPEG_OPTIMIZE, 1}))
@@ -265,37 +266,39 @@ std::vector<unsigned char> EncodeWebGlb(const texture::TexturedModel& model,
   json["bufferViews"] = views;
   Json buffers = Json::array({{{"byteLength", bin.size()}}});
   if (options.compress)
-    buffers.push_back({{"byteLength", fallback_bytes},
-                       {"extensions", {{kMeshopt, {{"fallback", true}}}}}});
+    buffers.push_back(
+        {{"byteLength", fallback_bytes}, {"extensions", {{kMeshopt, {{"fallback", true}}}}}});
   json["buffers"] = buffers;
-  json["accessors"] = Json::array(
-      {{{"bufferView", 0}, {"componentType", 5126}, {"count", used}, {"type", "VEC3"},
-        {"min", lo}, {"max", hi}},
-       {{"bufferView", 1}, {"componentType", 5126}, {"count", used}, {"type", "VEC2"}},
-       {{"bufferView", 2},
-        {"componentType", short_indices ? 5123 : 5125},
-        {"count", indices.size()},
-        {"type", "SCALAR"}}});
+  json["accessors"] =
+      Json::array({{{"bufferView", 0},
+                    {"componentType", 5126},
+                    {"count", used},
+                    {"type", "VEC3"},
+                    {"min", lo},
+                    {"max", hi}},
+                   {{"bufferView", 1}, {"componentType", 5126}, {"count", used}, {"type", "VEC2"}},
+                   {{"bufferView", 2},
+                    {"componentType", short_indices ? 5123 : 5125},
+                    {"count", indices.size()},
+                    {"type", "SCALAR"}}});
   json["images"] = Json::array({{{"bufferView", 3}, {"mimeType", "image/jpeg"}}});
   const bool repeat = model.wrap == texture::TexturedModel::Wrap::kRepeat;
   const int wrap = repeat ? 10497 : 33071;
-  json["samplers"] = Json::array(
-      {{{"magFilter", 9729}, {"minFilter", 9987}, {"wrapS", wrap}, {"wrapT", wrap}}});
+  json["samplers"] =
+      Json::array({{{"magFilter", 9729}, {"minFilter", 9987}, {"wrapS", wrap}, {"wrapT", wrap}}});
   json["textures"] = Json::array({{{"sampler", 0}, {"source", 0}}});
-  Json material = {{"name", "model"},
-                   {"pbrMetallicRoughness",
-                    {{"baseColorTexture", {{"index", 0}}},
-                     {"metallicFactor", 0.0},
-                     {"roughnessFactor", 1.0}}}};
+  Json material = {
+      {"name", "model"},
+      {"pbrMetallicRoughness",
+       {{"baseColorTexture", {{"index", 0}}}, {"metallicFactor", 0.0}, {"roughnessFactor", 1.0}}}};
   if (options.unlit) material["extensions"] = {{kUnlit, Json::object()}};
   json["materials"] = Json::array({material});
   json["meshes"] = Json::array(
       {{{"name", "model"},
-        {"primitives",
-         Json::array({{{"attributes", {{"POSITION", 0}, {"TEXCOORD_0", 1}}},
-                       {"indices", 2},
-                       {"material", 0},
-                       {"mode", 4}}})}}});
+        {"primitives", Json::array({{{"attributes", {{"POSITION", 0}, {"TEXCOORD_0", 1}}},
+                                     {"indices", 2},
+                                     {"material", 0},
+                                     {"mode", 4}}})}}});
   json["nodes"] = Json::array({{{"name", "model"}, {"mesh", 0}}});
   json["scenes"] = Json::array({{{"nodes", Json::array({0})}}});
   json["scene"] = 0;
@@ -335,7 +338,9 @@ texture::TexturedModel ReadWebGlb(const std::filesystem::path& path) {
     bin.assign(file.begin() + static_cast<long>(bin_at + 8),
                file.begin() + static_cast<long>(bin_at + 8 + length));
   }
-  const auto is_meshopt = [](const Json& j) { return j.value("extensions", Json::object()).contains(kMeshopt); };
+  const auto is_meshopt = [](const Json& j) {
+    return j.value("extensions", Json::object()).contains(kMeshopt);
+  };
   bool compressed = false;
   try {
     for (Json& view : json.at("bufferViews")) {
@@ -347,19 +352,23 @@ texture::TexturedModel ReadWebGlb(const std::filesystem::path& path) {
       const std::size_t stride = ext.at("byteStride").get<std::size_t>();
       const std::size_t count = ext.at("count").get<std::size_t>();
       const std::string mode = ext.at("mode").get<std::string>();
-      if (ext.at("buffer").get<int>() != 0) throw FormatError(path, "compressed data outside the GLB's own buffer");
+      if (ext.at("buffer").get<int>() != 0)
+        throw FormatError(path, "compressed data outside the GLB's own buffer");
       if (ext.value("filter", std::string("NONE")) != "NONE")
         throw FormatError(path, "unsupported meshopt filter " + ext["filter"].get<std::string>());
-      if (offset + length > bin.size()) throw FormatError(path, "compressed stream outside the BIN chunk");
+      if (offset + length > bin.size())
+        throw FormatError(path, "compressed stream outside the BIN chunk");
       if (count == 0 || stride == 0 || count > (std::size_t{1} << 31) / stride)
         throw FormatError(path, "implausible compressed stream size");
       Bytes decoded(count * stride);
       int status = -1;
       if (mode == "ATTRIBUTES") {
-        status = meshopt_decodeVertexBuffer(decoded.data(), count, stride, bin.data() + offset, length);
+        status =
+            meshopt_decodeVertexBuffer(decoded.data(), count, stride, bin.data() + offset, length);
       } else if (mode == "TRIANGLES") {
         if (stride != 2 && stride != 4) throw FormatError(path, "index stride must be 2 or 4");
-        status = meshopt_decodeIndexBuffer(decoded.data(), count, stride, bin.data() + offset, length);
+        status =
+            meshopt_decodeIndexBuffer(decoded.data(), count, stride, bin.data() + offset, length);
       } else {
         throw FormatError(path, "unsupported meshopt mode " + mode);
       }
@@ -394,7 +403,8 @@ texture::TexturedModel ReadWebGlb(const std::filesystem::path& path) {
   // KHR_materials_unlit changes only how a viewer lights the model; the reader ignores it.
   if (json.contains("extensionsRequired"))
     for (const Json& e : json["extensionsRequired"])
-      if (e != kUnlit) throw FormatError(path, "unsupported: the file requires extension " + e.dump());
+      if (e != kUnlit)
+        throw FormatError(path, "unsupported: the file requires extension " + e.dump());
   return texture::ReadTexturedModelFromGlb(AssembleGlb(json, bin), path);
 }
 

@@ -48,9 +48,11 @@ texture::TexturedModel Sphere(int rings, int segments, int texture_side) {
   m.texture = cv::Mat(texture_side, texture_side, CV_8UC3);
   for (int y = 0; y < texture_side; ++y)
     for (int x = 0; x < texture_side; ++x) {
-      const double u = static_cast<double>(x) / texture_side, v = static_cast<double>(y) / texture_side;
+      const double u = static_cast<double>(x) / texture_side,
+                   v = static_cast<double>(y) / texture_side;
       m.texture.at<cv::Vec3b>(y, x) = cv::Vec3b(
-          static_cast<uchar>(128 + 100 * std::sin(12 * u)), static_cast<uchar>(128 + 100 * std::cos(9 * v)),
+          static_cast<uchar>(128 + 100 * std::sin(12 * u)),
+          static_cast<uchar>(128 + 100 * std::cos(9 * v)),
           static_cast<uchar>((static_cast<int>(8 * u) + static_cast<int>(8 * v)) % 2 ? 220 : 40));
     }
   return m;
@@ -138,8 +140,8 @@ TEST(WebGlbTest, DamagedOrForeignFilesAreNamed) {
 
 TEST(OrbitCameraTest, LooksAtTheCentreAndFramesTheModel) {
   const texture::TexturedModel model = Sphere(16, 32, 64);
-  const OrbitShot shot{.azimuth_deg = 45, .elevation_deg = 30, .width = 400, .height = 300,
-                       .fill = 0.8};
+  const OrbitShot shot{
+      .azimuth_deg = 45, .elevation_deg = 30, .width = 400, .height = 300, .fill = 0.8};
   const CameraModel camera = OrbitCamera(model, shot);
   const auto centre = camera.Project({0, 0, 0.1});
   ASSERT_TRUE(centre);
@@ -202,20 +204,24 @@ Command RunShell(const std::string& command) {
 
 // A small simulated session, made once per CTest run: its lossless and web GLBs.
 std::filesystem::path SmallSession() {
-  return testing::SharedFixture("publish-small-session", [](const std::filesystem::path& out) {
-    const Command run = RunShell((testing::BinDir() / "carousel").string() + " run --sim --data " +
-                            testing::SharedDataDir().string() +
-                            " --scene shoe --product tiny --out " + out.string() +
-                            " --views 8 --size 648x432 --exclude-views 3");
-    if (run.code != 0) throw IoError(out, "carousel run failed:\n" + run.out);
-  }) / "tiny";
+  return testing::SharedFixture("publish-small-session",
+                                [](const std::filesystem::path& out) {
+                                  const Command run = RunShell(
+                                      (testing::BinDir() / "carousel").string() +
+                                      " run --sim --data " + testing::SharedDataDir().string() +
+                                      " --scene shoe --product tiny --out " + out.string() +
+                                      " --views 8 --size 648x432 --exclude-views 3");
+                                  if (run.code != 0)
+                                    throw IoError(out, "carousel run failed:\n" + run.out);
+                                }) /
+         "tiny";
 }
 
 TEST(GltfValidatorTest, TheSessionsGlbsHaveNoErrorsAndNoWarnings) {
   const std::filesystem::path model = SmallSession() / "model";
-  const Command check = RunShell("node " + std::string(CAROUSEL_SOURCE_DIR) +
-                            "/tests/web/validate-gltf.mjs " + (model / "model.glb").string() +
-                            " " + (model / "model.web.glb").string());
+  const Command check =
+      RunShell("node " + std::string(CAROUSEL_SOURCE_DIR) + "/tests/web/validate-gltf.mjs " +
+               (model / "model.glb").string() + " " + (model / "model.web.glb").string());
   EXPECT_EQ(check.code, 0) << check.out;
   EXPECT_THAT(check.out, HasSubstr("model.glb: 0 errors, 0 warnings"));
   EXPECT_THAT(check.out, HasSubstr("model.web.glb: 0 errors, 0 warnings"));
@@ -224,7 +230,7 @@ TEST(GltfValidatorTest, TheSessionsGlbsHaveNoErrorsAndNoWarnings) {
   const std::string bytes = testing::ReadBytes(model / "model.web.glb");
   testing::WriteBytes(dir / "cut.glb", bytes.substr(0, bytes.size() / 3));
   const Command cut = RunShell("node " + std::string(CAROUSEL_SOURCE_DIR) +
-                          "/tests/web/validate-gltf.mjs " + (dir / "cut.glb").string());
+                               "/tests/web/validate-gltf.mjs " + (dir / "cut.glb").string());
   EXPECT_EQ(cut.code, 1) << cut.out;
 }
 
@@ -250,10 +256,10 @@ TEST(PublishStageTest, WebGlbScoresAsTheLosslessOneAndIsSmaller) {
 TEST(BrowserTest, ModelViewerShowsTheWebGlbAsOurRendererDoes) {
   const std::filesystem::path model = SmallSession() / "model";
   testing::TempDir out;
-  const Command shots = RunShell("node " + std::string(CAROUSEL_SOURCE_DIR) +
-                                 "/tests/web/viewer-shots.mjs --site " + model.string() +
-                                 " --page index.html --out " + out.path().string() +
-                                 " --width 480 --height 360 --timeout 120");
+  const Command shots =
+      RunShell("node " + std::string(CAROUSEL_SOURCE_DIR) + "/tests/web/viewer-shots.mjs --site " +
+               model.string() + " --page index.html --out " + out.path().string() +
+               " --width 480 --height 360 --timeout 120");
   ASSERT_EQ(shots.code, 0) << shots.out;
   const auto json = nlohmann::json::parse(testing::ReadBytes(out / "shots.json"));
   ASSERT_EQ(json["shots"].size(), 4u);
@@ -274,8 +280,8 @@ TEST(BrowserTest, ModelViewerShowsTheWebGlbAsOurRendererDoes) {
     texture::ModelRenderOptions options;
     options.backdrop_top_bgr = options.backdrop_bottom_bgr = {255, 255, 255};
     const cv::Mat ours = texture::RenderTexturedModel(web, camera, options).image;
-    const cv::Mat theirs = cv::imread((out / shot["file"].get<std::string>()).string(),
-                                      cv::IMREAD_COLOR);
+    const cv::Mat theirs =
+        cv::imread((out / shot["file"].get<std::string>()).string(), cv::IMREAD_COLOR);
     ASSERT_EQ(theirs.size(), ours.size()) << "shot " << k;
     // Over the pixels where either image shows the object (the white backdrop would inflate
     // a whole-frame figure).
@@ -291,8 +297,10 @@ TEST(BrowserTest, ModelViewerShowsTheWebGlbAsOurRendererDoes) {
     const cv::Scalar sum = cv::sum(squared);
     const double mse = (sum[0] + sum[1] + sum[2]) / (3.0 * std::max(1, cv::countNonZero(object)));
     const double psnr = 10 * std::log10(255.0 * 255.0 / std::max(mse, 1e-10));
-    std::printf("shot %zu: object covers %.1f %% of the frame; PSNR vs our renderer %.2f dB over "
-                "the object\n", k, 100 * fraction, psnr);
+    std::printf(
+        "shot %zu: object covers %.1f %% of the frame; PSNR vs our renderer %.2f dB over "
+        "the object\n",
+        k, 100 * fraction, psnr);
     EXPECT_GT(psnr, 28.0) << "shot " << k;
   }
 }

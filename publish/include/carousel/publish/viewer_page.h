@@ -21,9 +21,9 @@ struct WebRuntime {
 WebRuntime FindWebRuntime();
 
 struct ViewerPageOptions {
-  std::string title;                    // the product's name (escaped for HTML)
-  std::string glb = "model.web.glb";    // relative to the page
-  std::string poster;                   // relative image shown while loading; empty: none
+  std::string title;                  // the product's name (escaped for HTML)
+  std::string glb = "model.web.glb";  // relative to the page
+  std::string poster;                 // relative image shown while loading; empty: none
   bool auto_rotate = true;
 };
 

@@ -35,11 +35,11 @@ struct WebGlbOptions {
 };
 
 struct WebGlbResult {
-  std::size_t bytes = 0;           // the whole file
-  std::size_t texture_bytes = 0;   // the JPEG inside
-  std::size_t geometry_bytes = 0;  // the (compressed) vertex and index streams
+  std::size_t bytes = 0;               // the whole file
+  std::size_t texture_bytes = 0;       // the JPEG inside
+  std::size_t geometry_bytes = 0;      // the (compressed) vertex and index streams
   std::size_t geometry_raw_bytes = 0;  // the same uncompressed
-  int texture_size = 0;            // texels per side
+  int texture_size = 0;                // texels per side
   std::size_t vertices = 0, triangles = 0;
 };
 
@@ -48,7 +48,8 @@ int WebTextureSize(int atlas_side, int max_texture_size);
 
 // The file's bytes. \throw InvalidArgument (model, options).
 std::vector<unsigned char> EncodeWebGlb(const texture::TexturedModel& model,
-                                        const WebGlbOptions& options, WebGlbResult* result = nullptr);
+                                        const WebGlbOptions& options,
+                                        WebGlbResult* result = nullptr);
 
 // Writes `path` atomically. \throw InvalidArgument, IoError naming the file.
 WebGlbResult WriteWebGlb(const texture::TexturedModel& model, const std::filesystem::path& path,
