@@ -66,7 +66,8 @@ PublishSessionResult PublishSession(const std::filesystem::path& session_folder,
     const std::vector<View> views = SessionViews(session_folder, session);
     for (const int v : excluded) {
       if (v < 0 || static_cast<std::size_t>(v) >= views.size())
-        throw FormatError(report_path, "excluded view " + std::to_string(v) + " is not a view of the session");
+        throw FormatError(report_path,
+                          "excluded view " + std::to_string(v) + " is not a view of the session");
       const std::string& truth = static_cast<std::size_t>(v) < session.ground_truth.masks.size()
                                      ? session.ground_truth.masks[v]
                                      : std::string();
@@ -83,12 +84,14 @@ PublishSessionResult PublishSession(const std::filesystem::path& session_folder,
   publish::OrbitShot hero;
   hero.width = hero.height = options.poster_size;
   std::vector<std::uint8_t> poster;
-  if (!cv::imencode(".jpg", publish::RenderShot(model, hero), poster, {cv::IMWRITE_JPEG_QUALITY, 88}))
+  if (!cv::imencode(".jpg", publish::RenderShot(model, hero), poster,
+                    {cv::IMWRITE_JPEG_QUALITY, 88}))
     throw IoError(model_folder / "poster.jpg", "JPEG encoding failed");
-  WriteFileAtomic(model_folder / "poster.jpg", std::span<const std::uint8_t>(poster.data(), poster.size()));
-  publish::WriteViewerPage(model_folder,
-                           {.title = session.product, .glb = "model.web.glb", .poster = "poster.jpg"},
-                           runtime);
+  WriteFileAtomic(model_folder / "poster.jpg",
+                  std::span<const std::uint8_t>(poster.data(), poster.size()));
+  publish::WriteViewerPage(
+      model_folder, {.title = session.product, .glb = "model.web.glb", .poster = "poster.jpg"},
+      runtime);
   progress.Report(0.9);
 
   nlohmann::ordered_json summary;
