@@ -10,6 +10,8 @@
 #include "carousel/publish/renders.h"
 #include "carousel/publish/viewer_page.h"
 
+#include "held_out_reference.h"
+
 namespace carousel::studio {
 
 const OptionTable<PublishSessionOptions>& PublishSessionOptions::Fields() {
@@ -68,10 +70,7 @@ PublishSessionResult PublishSession(const std::filesystem::path& session_folder,
       if (v < 0 || static_cast<std::size_t>(v) >= views.size())
         throw FormatError(report_path,
                           "excluded view " + std::to_string(v) + " is not a view of the session");
-      const std::string& truth = static_cast<std::size_t>(v) < session.ground_truth.masks.size()
-                                     ? session.ground_truth.masks[v]
-                                     : std::string();
-      const cv::Mat reference = !truth.empty() ? ReadMask(session_folder / truth) : views[v].Mask();
+      const cv::Mat reference = HeldOutReferenceMask(session_folder, session, views, v);
       result.held_out_lossless.push_back(texture::ScoreHeldOutView(model, views[v], v, reference));
       result.held_out_web.push_back(texture::ScoreHeldOutView(web, views[v], v, reference));
       progress.CheckCancelled();

@@ -11,6 +11,8 @@
 #include "carousel/texture/quality_report.h"
 #include "carousel/texture/textured_model.h"
 
+#include "held_out_reference.h"
+
 namespace carousel::studio {
 
 const OptionTable<TextureSessionOptions>& TextureSessionOptions::Fields() {
@@ -100,10 +102,7 @@ TextureSessionResult TextureSession(const std::filesystem::path& session_folder,
                                               ? texture::ReadTexturedModel(result.files.glb)
                                               : texture::TexturedModelFromMesh(mesh, map.texture);
     for (const int v : options.grouping.exclude_views) {
-      const std::string& truth = static_cast<std::size_t>(v) < session.ground_truth.masks.size()
-                                     ? session.ground_truth.masks[v]
-                                     : std::string();
-      const cv::Mat reference = !truth.empty() ? ReadMask(session_folder / truth) : views[v].Mask();
+      const cv::Mat reference = HeldOutReferenceMask(session_folder, session, views, v);
       result.held_out.push_back(texture::ScoreHeldOutView(viewed, views[v], v, reference));
     }
     result.mean_psnr_db = texture::MeanPsnrDb(result.held_out);
