@@ -243,6 +243,7 @@ CaptureResult CaptureSession(const std::filesystem::path& folder, Session& sessi
       result.photos_taken + result.photos_adopted + result.photos_retaken > 0;
   if (capture_changed || session.stages["capture"] != "done") {
     session.stages["capture"] = "done";
+    session.stage_seconds["capture"] = watch.ElapsedSeconds();
     if (capture_changed) {
       // New photos make the later stages stale.
       session.stages.erase("reconstruct");

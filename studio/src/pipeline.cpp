@@ -112,8 +112,9 @@ std::string Staleness(const Session& session, const char* stage, const std::stri
 }
 
 void RecordInputs(const std::filesystem::path& folder, Session& session, const char* stage,
-                  const std::string& fingerprint) {
+                  const std::string& fingerprint, double seconds) {
   session.stage_inputs[stage] = fingerprint;
+  session.stage_seconds[stage] = seconds;
   WriteSessionManifest(folder, session);
 }
 
@@ -178,8 +179,8 @@ ProcessResult ProcessSession(const std::filesystem::path& folder, Session& sessi
                       << ": reconstruct runs (" << result.reconstruct_reason << ")");
     Stopwatch watch;
     result.reconstruct = ReconstructSession(folder, session, options.reconstruct, progress);
-    RecordInputs(folder, session, kReconstruct, recon_inputs);
     result.seconds_reconstruct = watch.ElapsedSeconds();
+    RecordInputs(folder, session, kReconstruct, recon_inputs, result.seconds_reconstruct);
   } else {
     result.reconstruct_reason = "current";
   }
@@ -196,8 +197,8 @@ ProcessResult ProcessSession(const std::filesystem::path& folder, Session& sessi
     CAROUSEL_LOG_INFO(folder.string() << ": texture runs (" << result.texture_reason << ")");
     Stopwatch watch;
     result.texture = TextureSession(folder, session, options.texture, progress);
-    RecordInputs(folder, session, kTexture, texture_inputs);
     result.seconds_texture = watch.ElapsedSeconds();
+    RecordInputs(folder, session, kTexture, texture_inputs, result.seconds_texture);
   } else {
     result.texture_reason = "current";
   }
@@ -210,16 +211,17 @@ ProcessResult ProcessSession(const std::filesystem::path& folder, Session& sessi
   result.publish_reason =
       (options.force || result.texture)
           ? (options.force ? "forced" : "the texture ran")
-          : Staleness(session, kPublish, publish_inputs,
-                      AllExist(folder, {"model/model.web.glb", "model/index.html",
-                                        "model/poster.jpg", "model/publish.json"}));
+          : Staleness(
+                session, kPublish, publish_inputs,
+                AllExist(folder, {"model/model.web.glb", "model/index.html", "model/poster.jpg",
+                                  "model/hero.jpg", "model/publish.json"}));
   if (!result.publish_reason.empty()) {
     CAROUSEL_LOG_INFO(folder.string() << ": publish runs (" << result.publish_reason << ")");
     Stopwatch watch;
     result.publish = PublishSession(folder, session, options.publish, progress);
     session.stages[kPublish] = "done";
-    RecordInputs(folder, session, kPublish, publish_inputs);
     result.seconds_publish = watch.ElapsedSeconds();
+    RecordInputs(folder, session, kPublish, publish_inputs, result.seconds_publish);
   } else {
     result.publish_reason = "current";
   }

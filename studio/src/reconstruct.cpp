@@ -135,6 +135,10 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
   result.seconds_agreement = watch.ElapsedSeconds();
 
   session.stages["reconstruct"] = "done";
+  session.stage_seconds["reconstruct/silhouettes"] = result.seconds_silhouettes;
+  session.stage_seconds["reconstruct/hull"] = result.seconds_hull;
+  session.stage_seconds["reconstruct/mesh"] = result.seconds_mesh;
+  session.stage_seconds["reconstruct/agreement"] = result.seconds_agreement;
   WriteSessionManifest(session_folder, session);
   return result;
 }

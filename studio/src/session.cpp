@@ -61,6 +61,7 @@ void WriteSessionManifest(const std::filesystem::path& folder, const Session& se
                    {"views", views},
                    {"stages", session.stages}};
   if (!session.stage_inputs.empty()) manifest["stage_inputs"] = session.stage_inputs;
+  if (!session.stage_seconds.empty()) manifest["stage_seconds"] = session.stage_seconds;
   if (!session.ground_truth.empty()) {
     manifest["ground_truth"] = {{"mesh", session.ground_truth.mesh},
                                 {"masks", session.ground_truth.masks},
@@ -105,6 +106,10 @@ Session ReadSession(const std::filesystem::path& folder) {
   }
   session.stages = read.OptionalStringMap("stages").value_or(session.stages);
   session.stage_inputs = read.OptionalStringMap("stage_inputs").value_or(session.stage_inputs);
+  if (const std::optional<JsonReader> seconds = read.OptionalObject("stage_seconds")) {
+    for (const auto& [stage, value] : seconds->value().items())
+      session.stage_seconds[stage] = seconds->Number(stage);
+  }
   if (const std::optional<JsonReader> truth = read.OptionalObject("ground_truth")) {
     session.ground_truth.mesh = truth->OptionalRelativePath("mesh", kFolder).value_or("");
     for (const JsonReader& mask : truth->Array("masks")) {

@@ -62,6 +62,8 @@ struct Session {
   std::map<std::string, std::string> stages;  // stage name -> state ("done", ...)
   // stage name -> fingerprint of the inputs it ran on (pipeline.h), recorded after it finished
   std::map<std::string, std::string> stage_inputs;
+  // stage name -> seconds its last run took (the report page's stage times)
+  std::map<std::string, double> stage_seconds;
 };
 
 // Reads <folder>/session.json. \throw IoError (missing) or FormatError (malformed JSON, missing
@@ -86,7 +88,7 @@ std::string NowUtc();
 // and leaves the target untouched.
 class StagedSessionFolder {
  public:
-  // 	hrow IoError if the target exists (and not `overwrite`) or its parent is missing.
+  // \throw IoError if the target exists (and not `overwrite`) or its parent is missing.
   StagedSessionFolder(const std::filesystem::path& target, bool overwrite);
   ~StagedSessionFolder();
   StagedSessionFolder(const StagedSessionFolder&) = delete;
@@ -94,9 +96,9 @@ class StagedSessionFolder {
   // Where to write now.
   const std::filesystem::path& staging() const { return staging_; }
   const std::filesystem::path& target() const { return target_; }
-  // Creates a sub-folder of the staging folder. 	hrow IoError.
+  // Creates a sub-folder of the staging folder. \throw IoError.
   void CreateFolder(const std::filesystem::path& relative) const;
-  // Moves the finished session into place. 	hrow IoError (the target is then unchanged).
+  // Moves the finished session into place. \throw IoError (the target is then unchanged).
   void Commit();
 
  private:
