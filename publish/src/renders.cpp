@@ -59,6 +59,43 @@ CameraModel OrbitCamera(const texture::TexturedModel& model, const OrbitShot& sh
   const double half_side_px = 0.5 * std::min(shot.width, shot.height) * shot.fill;
   const double distance = radius / std::sin(std::atan(half_side_px / fy));
   const double az = shot.azimuth_deg * kDeg, el = shot.elevation_deg * kDeg;
+  if (shot.framing != OrbitShot::Framing::kSphere) {
+    // The cylinder: radius about the vertical axis through the box's centre, and height.
+    double r = 1e-6;
+    for (const Eigen::Vector3d& p : model.positions)
+      r = std::max(r, std::hypot(p.x() - centre.x(), p.y() - centre.y()));
+    const double height = box.sizes().z();
+    const double fx = fy;  // square pixels
+    const double tan_h = 0.5 * std::max(shot.width, 1) * shot.fill / fx;
+    const double tan_v = 0.5 * std::max(shot.height, 1) * shot.fill / fy;
+    const double vertical = 0.5 * height * std::cos(el) + r * std::abs(std::sin(el));
+    // The nearest point of the cylinder is r closer than its axis.
+    const double tight_distance = r + std::max(r / tan_h, vertical / tan_v);
+    const Eigen::Vector3d tight_eye =
+        centre + tight_distance * Eigen::Vector3d(std::cos(el) * std::cos(az),
+                                                  std::cos(el) * std::sin(az), std::sin(el));
+    CameraModel camera = PinholeLookingAt(tight_eye, centre, shot.fov_deg, shot.width, shot.height);
+    if (shot.framing == OrbitShot::Framing::kCylinder) return camera;
+    // kFit: the outline's extent from the centre, as a fraction of the half-image, scales the
+    // distance from the centre (exact for the centre's depth; three rounds settle the rest).
+    double d = tight_distance;
+    for (int round = 0; round < 3; ++round) {
+      double extent = 1e-9;
+      for (const Eigen::Vector3d& p : model.positions) {
+        const Eigen::Vector3d c =
+            camera.cam_from_world.rotation * p + camera.cam_from_world.translation;
+        if (c.z() <= 1e-9) continue;
+        extent = std::max({extent, std::abs(camera.fx * c.x() / c.z()) / (0.5 * shot.width),
+                           std::abs(camera.fy * c.y() / c.z()) / (0.5 * shot.height)});
+      }
+      d *= extent / shot.fill;
+      const Eigen::Vector3d eye =
+          centre + d * Eigen::Vector3d(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az),
+                                       std::sin(el));
+      camera = PinholeLookingAt(eye, centre, shot.fov_deg, shot.width, shot.height);
+    }
+    return camera;
+  }
   const Eigen::Vector3d eye =
       centre + distance * Eigen::Vector3d(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az),
                                           std::sin(el));

@@ -1,5 +1,6 @@
 #include "carousel/publish/viewer_page.h"
 
+#include <algorithm>
 #include <cstdlib>
 #include <sstream>
 
@@ -9,19 +10,32 @@
 namespace carousel::publish {
 namespace {
 
-constexpr const char* kModelViewerFile = "model-viewer.min.js";
-constexpr const char* kDecoderFile = "meshopt_decoder.js";
-
-void CopyIfDifferent(const std::filesystem::path& from, const std::filesystem::path& to) {
-  const std::vector<std::uint8_t> bytes = ReadFileBytes(from);
-  std::error_code ec;
-  if (std::filesystem::is_regular_file(to, ec) &&
-      std::filesystem::file_size(to, ec) == bytes.size() && ReadFileBytes(to) == bytes)
-    return;
-  WriteFileAtomic(to, std::span<const std::uint8_t>(bytes.data(), bytes.size()));
-}
+constexpr const char* kModelViewerFile = kModelViewerScript;
+constexpr const char* kDecoderFile = kMeshoptDecoderScript;
 
 }  // namespace
+
+bool WriteIfDifferent(const std::filesystem::path& path, std::span<const std::uint8_t> bytes) {
+  std::error_code ec;
+  if (std::filesystem::is_regular_file(path, ec) &&
+      std::filesystem::file_size(path, ec) == bytes.size()) {
+    const std::vector<std::uint8_t> old = ReadFileBytes(path);
+    if (std::equal(old.begin(), old.end(), bytes.begin(), bytes.end())) return false;
+  }
+  WriteFileAtomic(path, bytes);
+  return true;
+}
+
+bool WriteIfDifferent(const std::filesystem::path& path, const std::string& text) {
+  return WriteIfDifferent(
+      path, std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(text.data()),
+                                          text.size()));
+}
+
+bool CopyIfDifferent(const std::filesystem::path& from, const std::filesystem::path& to) {
+  const std::vector<std::uint8_t> bytes = ReadFileBytes(from);
+  return WriteIfDifferent(to, std::span<const std::uint8_t>(bytes.data(), bytes.size()));
+}
 
 WebRuntime FindWebRuntime() {
   const char* env = std::getenv("CAROUSEL_WEB_MODULES");
@@ -85,22 +99,29 @@ std::string ViewerPageHtml(const ViewerPageOptions& options) {
   h1 { font-size: 1.1rem; font-weight: 600; margin: 0.6rem 1rem; color: #222; }
   model-viewer { flex: 1; width: 100%; min-height: 320px; background-color: #fff;
                  --poster-color: #fff; }
+  nav { margin: 0 1rem 0.5rem; font-size: 0.9rem; }
+  nav a { margin-right: 1rem; }
 </style>
 <!-- The web GLB's geometry is meshopt-compressed: model-viewer decodes it only once a decoder
      location is set (it has no default); the decoder ships beside the page, for offline use. -->
 <script>
   self.ModelViewerElement = self.ModelViewerElement || {};
   self.ModelViewerElement.meshoptDecoderLocation = ')"
-       << kDecoderFile << R"(';
+       << EscapeHtml(options.script_dir) << kDecoderFile << R"(';
 </script>
 <script type="module" src=")"
-       << kModelViewerFile << R"("></script>
+       << EscapeHtml(options.script_dir) << kModelViewerFile << R"("></script>
 </head>
 <body>
 <h1>)" << title
-       << R"(</h1>
-<model-viewer src=")"
-       << EscapeHtml(options.glb) << '"';
+       << "</h1>\n";
+  if (!options.links.empty()) {
+    html << "<nav>";
+    for (const auto& [label, href] : options.links)
+      html << "<a href=\"" << EscapeHtml(href) << "\">" << EscapeHtml(label) << "</a>";
+    html << "</nav>\n";
+  }
+  html << R"(<model-viewer src=")" << EscapeHtml(options.glb) << '"';
   if (!options.poster.empty()) html << " poster=\"" << EscapeHtml(options.poster) << '"';
   html << " alt=\"" << title << "\"";
   html << R"( camera-controls touch-action="pan-y")";
@@ -121,9 +142,11 @@ void WriteViewerPage(const std::filesystem::path& folder, const ViewerPageOption
   std::error_code ec;
   std::filesystem::create_directories(folder, ec);
   if (ec) throw IoError(folder, "cannot create the folder: " + ec.message());
-  CopyIfDifferent(runtime.model_viewer, folder / kModelViewerFile);
-  CopyIfDifferent(runtime.meshopt_decoder, folder / kDecoderFile);
-  WriteFileAtomic(folder / "index.html", ViewerPageHtml(options));
+  if (options.script_dir.empty()) {
+    CopyIfDifferent(runtime.model_viewer, folder / kModelViewerFile);
+    CopyIfDifferent(runtime.meshopt_decoder, folder / kDecoderFile);
+  }
+  WriteIfDifferent(folder / "index.html", ViewerPageHtml(options));
 }
 
 }  // namespace carousel::publish

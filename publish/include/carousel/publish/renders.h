@@ -16,6 +16,13 @@ struct OrbitShot {
   double fov_deg = 30.0;  // vertical
   int width = 1024, height = 1024;
   double fill = 0.85;  // the bounding sphere's diameter over the shorter image side, (0, 1]
+  // How the model is framed: kSphere, its bounding sphere's diameter is `fill` of the shorter
+  // side (any direction, loose for a long product); kCylinder, its bounding cylinder about
+  // the vertical axis through its box's centre fits `fill` of the image at any azimuth, so the
+  // frames of a spin keep one scale; kFit, the model's own outline from this direction fills
+  // `fill` of the image along its tighter axis (the hero shot).
+  enum class Framing { kSphere, kCylinder, kFit };
+  Framing framing = Framing::kSphere;
 };
 
 // A distortion-free pinhole camera at `eye` looking at `target` (turntable frame, metres), no

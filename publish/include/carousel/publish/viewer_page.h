@@ -5,8 +5,12 @@
 // fetch from a CDN). The folder works offline from any static host.
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
+#include <span>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace carousel::publish {
 
@@ -25,10 +29,27 @@ struct ViewerPageOptions {
   std::string glb = "model.web.glb";  // relative to the page
   std::string poster;                 // relative image shown while loading; empty: none
   bool auto_rotate = true;
+  // Where the scripts are, relative to the page ("" = beside it; a catalog shares one copy:
+  // "../assets/"); WriteViewerPage copies them beside the page only when this is empty.
+  std::string script_dir;
+  // Links shown under the title (label, relative href): the report, the spin, the 360 set.
+  std::vector<std::pair<std::string, std::string>> links;
 };
+
+// The file names of the runtime's scripts where a page looks for them.
+inline constexpr const char* kModelViewerScript = "model-viewer.min.js";
+inline constexpr const char* kMeshoptDecoderScript = "meshopt_decoder.js";
 
 // The page's HTML.
 std::string ViewerPageHtml(const ViewerPageOptions& options);
+
+// Writes `bytes` to `path` atomically unless the file already holds exactly them (its time
+// stamp then stays: publishing twice changes nothing). Returns whether it wrote.
+// \throw IoError naming the file.
+bool WriteIfDifferent(const std::filesystem::path& path, std::span<const std::uint8_t> bytes);
+bool WriteIfDifferent(const std::filesystem::path& path, const std::string& text);
+// The same with the bytes of the file `from`. \throw IoError naming the file at fault.
+bool CopyIfDifferent(const std::filesystem::path& from, const std::filesystem::path& to);
 
 // Writes `folder`/index.html and copies the runtime's scripts beside it (each file atomically;
 // a script already there with the same bytes is left alone). \throw IoError naming the file.
