@@ -65,7 +65,13 @@ void PrintPublish(const std::filesystem::path& session, const studio::PublishSes
   if (!r.held_out_web.empty())
     out << "held-out mean PSNR: web " << r.mean_psnr_web_db << " dB, lossless "
         << r.mean_psnr_lossless_db << " dB\n";
-  out << "viewer page: " << (model / "index.html").string() << "\n";
+  out << "catalog: " << r.cutouts << " cut-outs";
+  if (r.spin_frames > 0)
+    out << ", 360° set of " << r.spin_frames << " ("
+        << (r.spin_from_photos ? "photos of camera " + std::to_string(r.spin_camera) : "renders")
+        << ") in " << (model / "360.zip").string() << " and " << (model / "spin.webp").string();
+  out << "\nviewer page: " << (model / "index.html").string() << ", report "
+      << (model / "report.html").string() << "\n";
 }
 
 void PrintCalibration(const studio::CalibrateSessionResult& r, std::ostream& out) {

@@ -17,6 +17,8 @@ struct ReconstructArgs {
 struct PublishArgs {
   std::vector<std::filesystem::path> sessions;
   studio::PublishSessionOptions options;
+  std::filesystem::path site;  // --out: the static catalog
+  std::string site_title = "Catalog";
 };
 
 struct ProcessArgs {
@@ -100,6 +102,11 @@ void AddPublishCommand(CLI::App& command, Dispatch& dispatch) {
   command.add_option("sessions", args->sessions, "session folders with a textured model")
       ->required();
   AddOptionFlags(&command, args->options, studio::PublishSessionOptions::Fields());
+  command.add_option("--out", args->site,
+                     "also copy each product into this static catalog site (SITE/<session>/, "
+                     "SITE/index.html)");
+  command.add_option("--site-title", args->site_title, "the catalog page's title")
+      ->capture_default_str();
   dispatch.On(&command, [args](Io& io) {
     int status = kExitOk;
     for (const std::filesystem::path& session : args->sessions) {
@@ -109,6 +116,14 @@ void AddPublishCommand(CLI::App& command, Dispatch& dispatch) {
                      studio::PublishSession(session, studio::ReadSession(session), args->options,
                                             cli.progress()),
                      io.out);
+        if (!args->site.empty()) {
+          const studio::SiteResult site = studio::AddToSite(session, args->site, args->site_title);
+          io.out << "site: " << site.product.folder.string() << " (" << site.product.files_written
+                 << " files written, " << site.product.files_unchanged << " unchanged, "
+                 << site.product.files_removed << " removed); "
+                 << (args->site / "index.html").string() << " lists " << site.products
+                 << (site.products == 1 ? " product\n" : " products\n");
+        }
       } catch (const std::exception& e) {
         io.err << "carousel publish: " << session.string() << ": error: " << e.what() << '\n';
         if (status == kExitOk) status = ExitCodeFor(e);
