@@ -465,7 +465,8 @@ TEST(SiteTest, TheCatalogLinksEveryProductAndPublishingTwiceChangesNothing) {
   EXPECT_TRUE(std::filesystem::is_regular_file(site / "assets/model-viewer.min.js"));
   EXPECT_TRUE(std::filesystem::is_regular_file(site / "assets/meshopt_decoder.js"));
   EXPECT_FALSE(std::filesystem::exists(site / "shoe-a/model-viewer.min.js"));
-  for (const auto& f : ReadJson(dir / "shoe-a/model/publish.json")["files"]) {
+  const nlohmann::json published = ReadJson(dir / "shoe-a/model/publish.json");
+  for (const auto& f : published["files"]) {
     const std::string name = f.get<std::string>();
     if (name == "model-viewer.min.js" || name == "meshopt_decoder.js") continue;
     EXPECT_TRUE(std::filesystem::is_regular_file(site / "shoe-a" / name)) << name;
