@@ -6,12 +6,12 @@
 #include <memory>
 #include <set>
 
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
 #include <webp/demux.h>
 #include <webp/encode.h>
 #include <webp/mux.h>
 #include <zip.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "carousel/core/error.h"
 #include "carousel/core/file_util.h"
@@ -46,7 +46,8 @@ cv::Mat CutOut(const cv::Mat& photo, const cv::Mat& alpha, const CutoutOptions& 
   CAROUSEL_THROW_IF(box.area() == 0, InvalidArgument, "cut-out: the mask has no object pixel");
   // The square around the box's centre.
   const double long_side = std::max(box.width, box.height);
-  const int side = std::max(1, static_cast<int>(std::lround(long_side / (1.0 - 2.0 * options.margin))));
+  const int side =
+      std::max(1, static_cast<int>(std::lround(long_side / (1.0 - 2.0 * options.margin))));
   const int x0 = static_cast<int>(std::lround(box.x + 0.5 * box.width - 0.5 * side));
   const int y0 = static_cast<int>(std::lround(box.y + 0.5 * box.height - 0.5 * side));
   const cv::Rect square(x0, y0, side, side);
@@ -86,9 +87,10 @@ cv::Mat CutOut(const cv::Mat& photo, const cv::Mat& alpha, const CutoutOptions& 
 std::vector<std::uint8_t> EncodeCatalogImage(const cv::Mat& image, int jpeg_quality,
                                              const std::filesystem::path& name) {
   std::vector<std::uint8_t> bytes;
-  const bool ok = image.channels() == 4
-                      ? cv::imencode(".png", image, bytes, {cv::IMWRITE_PNG_COMPRESSION, 6})
-                      : cv::imencode(".jpg", image, bytes, {cv::IMWRITE_JPEG_QUALITY, jpeg_quality});
+  const bool ok =
+      image.channels() == 4
+          ? cv::imencode(".png", image, bytes, {cv::IMWRITE_PNG_COMPRESSION, 6})
+          : cv::imencode(".jpg", image, bytes, {cv::IMWRITE_JPEG_QUALITY, jpeg_quality});
   if (!ok || bytes.empty()) throw IoError(name, "the image could not be encoded");
   return bytes;
 }
@@ -198,10 +200,9 @@ AnimatedImage DecodeAnimatedWebp(const std::vector<std::uint8_t>& bytes,
     if (!WebPAnimDecoderGetNext(decoder.get(), &pixels, &timestamp))
       throw FormatError(name, "frame " + std::to_string(result.frames.size() + 1) +
                                   " of the WebP animation cannot be decoded");
-    result.frames.push_back(
-        cv::Mat(static_cast<int>(info.canvas_height), static_cast<int>(info.canvas_width), CV_8UC4,
-                pixels)
-            .clone());
+    result.frames.push_back(cv::Mat(static_cast<int>(info.canvas_height),
+                                    static_cast<int>(info.canvas_width), CV_8UC4, pixels)
+                                .clone());
     result.timestamps_ms.push_back(timestamp);
   }
   return result;

@@ -50,7 +50,8 @@ std::vector<int> ChartOfTriangle(const texture::TexturedModel& model) {
   first_triangle.reserve(model.uvs.size());
   for (int t = 0; t < n; ++t)
     for (int k = 0; k < 3; ++k) {
-      const auto [it, added] = first_triangle.emplace(UvKey(model.uvs.at(model.triangles[t][k])), t);
+      const auto [it, added] =
+          first_triangle.emplace(UvKey(model.uvs.at(model.triangles[t][k])), t);
       if (!added) {
         const int a = Find(parent, it->second), b = Find(parent, t);
         if (a != b) parent[std::max(a, b)] = std::min(a, b);
@@ -69,9 +70,9 @@ std::vector<int> ChartOfTriangle(const texture::TexturedModel& model) {
 
 cv::Mat PaintTriangles(const texture::TexturedModel& model, const std::vector<cv::Vec3b>& colours,
                        int side, cv::Vec3b background, int spill) {
-  CAROUSEL_THROW_IF(colours.size() != model.triangles.size(), InvalidArgument,
-                    "paint: " << colours.size() << " colours for " << model.triangles.size()
-                              << " triangles");
+  CAROUSEL_THROW_IF(
+      colours.size() != model.triangles.size(), InvalidArgument,
+      "paint: " << colours.size() << " colours for " << model.triangles.size() << " triangles");
   CAROUSEL_THROW_IF(side < 8, InvalidArgument, "paint: the side must be >= 8");
   cv::Mat image(side, side, CV_8UC3, cv::Scalar(background[0], background[1], background[2]));
   cv::Mat painted(side, side, CV_8UC1, cv::Scalar(0));
@@ -152,16 +153,15 @@ std::vector<cv::Vec3b> DensityColours(const std::vector<double>& values, double 
 cv::Mat DensityLegend(int width, int height) {
   const cv::Mat map = Viridis();
   cv::Mat strip;
-  cv::resize(map, strip, cv::Size(std::max(width, 1), std::max(height, 1)), 0, 0,
-             cv::INTER_LINEAR);
+  cv::resize(map, strip, cv::Size(std::max(width, 1), std::max(height, 1)), 0, 0, cv::INTER_LINEAR);
   return strip;
 }
 
 std::string HistogramSvg(const std::vector<int>& edges, const std::vector<int>& counts,
                          int atlas_size) {
-  CAROUSEL_THROW_IF(edges.size() != counts.size() || edges.empty(), InvalidArgument,
-                    "histogram: " << edges.size() << " bin starts for " << counts.size()
-                                  << " counts");
+  CAROUSEL_THROW_IF(
+      edges.size() != counts.size() || edges.empty(), InvalidArgument,
+      "histogram: " << edges.size() << " bin starts for " << counts.size() << " counts");
   const int bins = static_cast<int>(counts.size());
   const int max_count = std::max(1, *std::max_element(counts.begin(), counts.end()));
   constexpr int kWidth = 760, kHeight = 320, kLeft = 56, kBottom = 52, kTop = 34;
@@ -181,10 +181,10 @@ std::string HistogramSvg(const std::vector<int>& edges, const std::vector<int>& 
     const double x = kLeft + i * bar_w + 0.12 * bar_w;
     const double y = kHeight - kBottom - h;
     const std::string label =
-        i + 1 == bins                 ? "&#8805;" + std::to_string(edges[i])
-        : edges[i + 1] - 1 == edges[i] ? std::to_string(edges[i])
-                                       : std::to_string(edges[i]) + "&#8211;" +
-                                             std::to_string(edges[i + 1] - 1);
+        i + 1 == bins ? "&#8805;" + std::to_string(edges[i])
+        : edges[i + 1] - 1 == edges[i]
+            ? std::to_string(edges[i])
+            : std::to_string(edges[i]) + "&#8211;" + std::to_string(edges[i + 1] - 1);
     svg << "<rect class=\"bar\" x=\"" << Fixed(x, 1) << "\" y=\"" << Fixed(y, 1) << "\" width=\""
         << Fixed(0.76 * bar_w, 1) << "\" height=\"" << Fixed(h, 1)
         << "\" fill=\"#3b6ea8\" data-count=\"" << counts[i] << "\"><title>" << counts[i]
@@ -196,8 +196,9 @@ std::string HistogramSvg(const std::vector<int>& edges, const std::vector<int>& 
   }
   svg << "<text x=\"" << kWidth / 2 << "\" y=\"" << kHeight - 10
       << "\" text-anchor=\"middle\" font-size=\"13\">texels per face</text>\n"
-      << "<text x=\"16\" y=\"" << kTop + plot_h / 2 << "\" font-size=\"13\" transform=\"rotate(-90 16 "
-      << kTop + plot_h / 2 << ")\" text-anchor=\"middle\">faces</text>\n"
+      << "<text x=\"16\" y=\"" << kTop + plot_h / 2
+      << "\" font-size=\"13\" transform=\"rotate(-90 16 " << kTop + plot_h / 2
+      << ")\" text-anchor=\"middle\">faces</text>\n"
       << "</svg>\n";
   return svg.str();
 }
@@ -211,8 +212,8 @@ std::string ReportPageHtml(const ReportPageContent& c) {
 <meta charset="utf-8">
 <meta name="viewport" content="width=device-width, initial-scale=1">
 <meta name="generator" content="Carousel">
-<title>)" << title
-       << R"( &#8212; model report</title>
+<title>)"
+       << title << R"( &#8212; model report</title>
 <style>
   body { font-family: system-ui, sans-serif; margin: 1rem 1.5rem; color: #222; max-width: 1100px; }
   h1 { font-size: 1.3rem; } h2 { font-size: 1.05rem; margin-top: 1.6rem; }
@@ -282,7 +283,8 @@ std::string ReportPageHtml(const ReportPageContent& c) {
     html << "</figure>\n";
   }
   if (!c.stage_seconds.empty()) {
-    html << "<h2>Stage times</h2>\n<table id=\"stages\">\n<tr><th>stage</th><th>seconds</th></tr>\n";
+    html
+        << "<h2>Stage times</h2>\n<table id=\"stages\">\n<tr><th>stage</th><th>seconds</th></tr>\n";
     for (const auto& [stage, seconds] : c.stage_seconds)
       html << "<tr><td>" << EscapeHtml(stage) << "</td><td>" << Fixed(seconds, 2) << "</td></tr>\n";
     html << "</table>\n";

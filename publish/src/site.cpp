@@ -83,7 +83,9 @@ SiteProductResult PublishToSite(const std::filesystem::path& model_folder, const
   CopyIfDifferent(runtime.meshopt_decoder, site / kAssets / kMeshoptDecoderScript);
 
   std::set<std::filesystem::path> wanted = {"index.html", kProductFile};
-  auto count = [&result](bool written) { ++(written ? result.files_written : result.files_unchanged); };
+  auto count = [&result](bool written) {
+    ++(written ? result.files_written : result.files_unchanged);
+  };
   for (const std::string& f : files) {
     if (f == "index.html" || f == kModelViewerScript || f == kMeshoptDecoderScript) continue;
     const std::filesystem::path to = result.folder / f;
@@ -142,8 +144,8 @@ int WriteSiteIndex(const std::filesystem::path& site, const std::string& title) 
 <meta charset="utf-8">
 <meta name="viewport" content="width=device-width, initial-scale=1">
 <meta name="generator" content="Carousel">
-<title>)" << EscapeHtml(title)
-       << R"(</title>
+<title>)"
+       << EscapeHtml(title) << R"(</title>
 <style>
   body { font-family: system-ui, sans-serif; margin: 1rem 1.5rem; color: #222; }
   h1 { font-size: 1.3rem; }

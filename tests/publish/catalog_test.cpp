@@ -7,8 +7,8 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <map>
 #include <fstream>
+#include <map>
 #include <regex>
 
 #include <gmock/gmock.h>
@@ -36,8 +36,7 @@ using ::testing::Not;
 // A photo with a smooth grey backdrop and a red-and-blue box at `box`, and its mask.
 std::pair<cv::Mat, cv::Mat> BoxPhoto(cv::Size size, cv::Rect box) {
   cv::Mat photo(size, CV_8UC3);
-  for (int y = 0; y < size.height; ++y)
-    photo.row(y).setTo(cv::Scalar(120 + y % 40, 130, 140));
+  for (int y = 0; y < size.height; ++y) photo.row(y).setTo(cv::Scalar(120 + y % 40, 130, 140));
   photo(box).setTo(cv::Scalar(30, 40, 200));
   photo(cv::Rect(box.x, box.y, box.width / 2, box.height)).setTo(cv::Scalar(200, 60, 20));
   cv::Mat mask(size, CV_8UC1, cv::Scalar(0));
@@ -80,7 +79,8 @@ TEST(CutOutTest, TransparentKeepsTheMaskAsAlphaAndSoftEdgesBlend) {
   const cv::Rect box(100, 20, 60, 150);
   auto [photo, mask] = BoxPhoto({320, 200}, box);
   mask.at<std::uint8_t>(100, box.x) = 128;  // a soft edge pixel
-  const cv::Mat cut = CutOut(photo, mask, {.backdrop = CutoutBackdrop::kTransparent, .margin = 0.05});
+  const cv::Mat cut =
+      CutOut(photo, mask, {.backdrop = CutoutBackdrop::kTransparent, .margin = 0.05});
   ASSERT_EQ(cut.type(), CV_8UC4);
   std::vector<cv::Mat> channels;
   cv::split(cut, channels);
@@ -185,7 +185,8 @@ texture::TexturedModel TwoSquares() {
     const float u0 = s == 0 ? 0.1f : 0.6f;
     for (int k = 0; k < 4; ++k) {
       m.positions.emplace_back(0.1 * s + 0.05 * (k % 2), 0.0, 0.05 * (k / 2));
-      m.uvs.emplace_back(u0 + 0.3f * static_cast<float>(k % 2), 0.1f + 0.3f * static_cast<float>(k / 2));
+      m.uvs.emplace_back(u0 + 0.3f * static_cast<float>(k % 2),
+                         0.1f + 0.3f * static_cast<float>(k / 2));
     }
     const int b = 4 * s;
     m.triangles.emplace_back(b, b + 1, b + 3);
@@ -229,8 +230,12 @@ TEST(ReportPageTest, IslandsPaintAndTheHistogramAndPageSayWhatTheyShow) {
   page.title = "<Shoe & Co>";
   page.histogram_edges = {0, 1};
   page.histogram_counts = {1, 2};
-  page.held_out = {{.view = 3, .image = "report/heldout_03.jpg", .psnr_db = 23.336, .ssim = 0.76,
-                    .psnr_db_web = 23.301, .ssim_web = 0.75}};
+  page.held_out = {{.view = 3,
+                    .image = "report/heldout_03.jpg",
+                    .psnr_db = 23.336,
+                    .ssim = 0.76,
+                    .psnr_db_web = 23.301,
+                    .ssim_web = 0.75}};
   page.stage_seconds = {{"reconstruct", 1.5}};
   const std::string html = ReportPageHtml(page);
   EXPECT_THAT(html, HasSubstr("&lt;Shoe &amp; Co&gt;"));
@@ -264,16 +269,15 @@ std::string Carousel() { return (testing::BinDir() / "carousel").string(); }
 
 // The small session publish_test makes (the same fixture key: one run per CTest run).
 std::filesystem::path SmallSession() {
-  return testing::SharedFixture("publish-small-session",
-                                [](const std::filesystem::path& out) {
-                                  const Command run = RunShell(
-                                      Carousel() + " run --sim --data " +
-                                      testing::SharedDataDir().string() +
-                                      " --scene shoe --product tiny --out " + out.string() +
-                                      " --views 8 --size 648x432 --exclude-views 3");
-                                  if (run.code != 0)
-                                    throw IoError(out, "carousel run failed:\n" + run.out);
-                                }) /
+  return testing::SharedFixture(
+             "publish-small-session",
+             [](const std::filesystem::path& out) {
+               const Command run =
+                   RunShell(Carousel() + " run --sim --data " + testing::SharedDataDir().string() +
+                            " --scene shoe --product tiny --out " + out.string() +
+                            " --views 8 --size 648x432 --exclude-views 3");
+               if (run.code != 0) throw IoError(out, "carousel run failed:\n" + run.out);
+             }) /
          "tiny";
 }
 
@@ -311,7 +315,8 @@ TEST(CatalogImagesTest, TheSpinAndTheTurntableRendersDecodeAndMatchTheModel) {
   EXPECT_GT(shot.elevation_deg, 5.0);  // the simulated camera looks down on the product
   cv::Mat previous;
   for (int k : {0, 5, 12, 19}) {
-    shot.azimuth_deg = orbit["first_azimuth_deg"].get<double>() + k * orbit["step_deg"].get<double>();
+    shot.azimuth_deg =
+        orbit["first_azimuth_deg"].get<double>() + k * orbit["step_deg"].get<double>();
     const cv::Mat ours = RenderShot(model, shot);
     const cv::Mat jpeg = Decode(set[k].bytes);
     ASSERT_EQ(jpeg.size(), ours.size()) << k;
@@ -380,10 +385,9 @@ TEST(CatalogImagesTest, CutOutsAreThePhotosThroughTheirMasksOnWhite) {
 
 TEST(CatalogImagesTest, ASessionWith24StopsMakesItsSetFromThePhotos) {
   testing::TempDir dir;
-  const Command run = RunShell(Carousel() + " run --sim --data " +
-                               testing::SharedDataDir().string() +
-                               " --scene shoe --product ring24 --out " + dir.path().string() +
-                               " --views 24 --size 324x216");
+  const Command run = RunShell(
+      Carousel() + " run --sim --data " + testing::SharedDataDir().string() +
+      " --scene shoe --product ring24 --out " + dir.path().string() + " --views 24 --size 324x216");
   ASSERT_EQ(run.code, 0) << run.out;
   const std::filesystem::path session = dir / "ring24";
   const nlohmann::json summary = ReadJson(session / "model/publish.json");
@@ -398,9 +402,9 @@ TEST(CatalogImagesTest, ASessionWith24StopsMakesItsSetFromThePhotos) {
   std::sort(by_angle.begin(), by_angle.end());
   for (const int k : {0, 7, 23}) {
     const nlohmann::json& view = manifest["views"][by_angle[k].second];
-    const cv::Mat expected = CutOut(ReadImage(session / view["image"].get<std::string>()),
-                                    ReadMask(session / view["mask"].get<std::string>()),
-                                    {.size = 720});
+    const cv::Mat expected =
+        CutOut(ReadImage(session / view["image"].get<std::string>()),
+               ReadMask(session / view["mask"].get<std::string>()), {.size = 720});
     const cv::Mat jpeg = Decode(set[k].bytes);
     ASSERT_EQ(jpeg.size(), expected.size());
     EXPECT_GT(cv::PSNR(jpeg, expected), 33.0) << k;
@@ -443,7 +447,8 @@ TEST(ReportPageTest, TheSessionsReportShowsItsFiguresAndEveryImageItNames) {
 std::map<std::string, std::filesystem::file_time_type> Times(const std::filesystem::path& root) {
   std::map<std::string, std::filesystem::file_time_type> times;
   for (const auto& e : std::filesystem::recursive_directory_iterator(root))
-    if (e.is_regular_file()) times[std::filesystem::relative(e.path(), root).string()] = e.last_write_time();
+    if (e.is_regular_file())
+      times[std::filesystem::relative(e.path(), root).string()] = e.last_write_time();
   return times;
 }
 
@@ -515,8 +520,8 @@ TEST(SiteTest, BadInputIsNamedAndNothingPublishedIsLost) {
   std::filesystem::copy(SmallSession(), dir / "s", std::filesystem::copy_options::recursive);
   // An unwritable site folder: its parent is a file.
   testing::WriteBytes(dir / "file", "x");
-  const Command unwritable =
-      RunShell(Carousel() + " publish " + (dir / "s").string() + " --out " + (dir / "file/site").string());
+  const Command unwritable = RunShell(Carousel() + " publish " + (dir / "s").string() + " --out " +
+                                      (dir / "file/site").string());
   EXPECT_NE(unwritable.code, 0);
   EXPECT_THAT(unwritable.out, HasSubstr((dir / "file/site").string()));
   EXPECT_THAT(unwritable.out, HasSubstr("site folder"));

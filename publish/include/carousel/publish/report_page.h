@@ -45,7 +45,7 @@ std::string HistogramSvg(const std::vector<int>& edges, const std::vector<int>& 
 
 struct ReportHeldOutRow {
   int view = 0;
-  std::string image;  // photo | render, relative to the page
+  std::string image;                         // photo | render, relative to the page
   double psnr_db = 0.0, ssim = 0.0;          // the lossless GLB
   double psnr_db_web = 0.0, ssim_web = 0.0;  // the web GLB
 };
@@ -54,7 +54,7 @@ struct ReportPageContent {
   std::string title;
   std::size_t faces = 0;
   int charts = 0, atlas_size = 0, views = 0;
-  int islands = 0;  // connected pieces of the UV layout (ChartOfTriangle)
+  int islands = 0;              // connected pieces of the UV layout (ChartOfTriangle)
   double dense_fraction = 0.0;  // faces with >= 1 texel per photo pixel
   std::vector<int> histogram_edges, histogram_counts;
   std::vector<ReportHeldOutRow> held_out;
