@@ -204,17 +204,10 @@ std::string HistogramSvg(const std::vector<int>& edges, const std::vector<int>& 
 }
 
 std::string ReportPageHtml(const ReportPageContent& c) {
-  const std::string title = EscapeHtml(c.title.empty() ? "3D model" : c.title);
+  const std::string name = c.title.empty() ? "3D model" : c.title;
+  const std::string title = EscapeHtml(name);
   std::ostringstream html;
-  html << R"(<!doctype html>
-<html lang="en">
-<head>
-<meta charset="utf-8">
-<meta name="viewport" content="width=device-width, initial-scale=1">
-<meta name="generator" content="Carousel">
-<title>)"
-       << title << R"( &#8212; model report</title>
-<style>
+  html << HtmlPageOpening(name + " \u2014 model report") << R"(<style>
   body { font-family: system-ui, sans-serif; margin: 1rem 1.5rem; color: #222; max-width: 1100px; }
   h1 { font-size: 1.3rem; } h2 { font-size: 1.05rem; margin-top: 1.6rem; }
   table { border-collapse: collapse; } td, th { padding: 0.25rem 0.7rem; text-align: right; }

@@ -138,15 +138,7 @@ int WriteSiteIndex(const std::filesystem::path& site, const std::string& title) 
     return std::tie(a.name, a.slug) < std::tie(b.name, b.slug);
   });
   std::ostringstream html;
-  html << R"(<!doctype html>
-<html lang="en">
-<head>
-<meta charset="utf-8">
-<meta name="viewport" content="width=device-width, initial-scale=1">
-<meta name="generator" content="Carousel">
-<title>)"
-       << EscapeHtml(title) << R"(</title>
-<style>
+  html << HtmlPageOpening(title) << R"(<style>
   body { font-family: system-ui, sans-serif; margin: 1rem 1.5rem; color: #222; }
   h1 { font-size: 1.3rem; }
   ul { list-style: none; padding: 0; display: grid; gap: 1rem;

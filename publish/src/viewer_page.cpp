@@ -82,18 +82,22 @@ std::string EscapeHtml(const std::string& text) {
   return out;
 }
 
-std::string ViewerPageHtml(const ViewerPageOptions& options) {
-  const std::string title = EscapeHtml(options.title.empty() ? "3D model" : options.title);
-  std::ostringstream html;
-  html << R"(<!doctype html>
+std::string HtmlPageOpening(const std::string& title) {
+  return R"(<!doctype html>
 <html lang="en">
 <head>
 <meta charset="utf-8">
 <meta name="viewport" content="width=device-width, initial-scale=1">
 <meta name="generator" content="Carousel">
-<title>)"
-       << title << R"(</title>
-<style>
+<title>)" +
+         EscapeHtml(title) + "</title>\n";
+}
+
+std::string ViewerPageHtml(const ViewerPageOptions& options) {
+  const std::string name = options.title.empty() ? "3D model" : options.title;
+  const std::string title = EscapeHtml(name);
+  std::ostringstream html;
+  html << HtmlPageOpening(name) << R"(<style>
   html, body { margin: 0; height: 100%; background: #fff; font-family: system-ui, sans-serif; }
   body { display: flex; flex-direction: column; }
   h1 { font-size: 1.1rem; font-weight: 600; margin: 0.6rem 1rem; color: #222; }

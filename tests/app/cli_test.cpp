@@ -15,11 +15,11 @@
 
 #include "carousel/core/image_io.h"
 
-#include <array>
 #include <cstdio>
 #include <regex>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <gmock/gmock.h>
@@ -161,15 +161,8 @@ TEST(CliTest, SelfCheckReportsABrokenDataFolder) {
 
 // The installed program as a user runs it, in a child process.
 CliResult RunBinary(const std::string& arguments) {
-  const std::string command = (testing::BinDir() / "carousel").string() + " " + arguments + " 2>&1";
-  FILE* pipe = ::popen(command.c_str(), "r");
-  if (pipe == nullptr) return {-1, "", "popen failed"};
-  std::string output;
-  std::array<char, 4096> buffer{};
-  while (std::size_t n = std::fread(buffer.data(), 1, buffer.size(), pipe))
-    output.append(buffer.data(), n);
-  const int status = ::pclose(pipe);
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, output, ""};
+  testing::ShellResult result = testing::RunShell(testing::CarouselExecutable() + " " + arguments);
+  return {result.code, std::move(result.out), ""};
 }
 
 TEST(CliBinaryTest, HelpAndUsageErrorsFromTheExecutable) {

@@ -1,6 +1,5 @@
 // publish/: the web GLB (meshopt + JPEG) read back and rendered against the model it came
 // from, the Khronos validator on the GLBs of a simulated session, the viewer page.
-#include <sys/wait.h>
 
 #include <cmath>
 #include <cstdio>
@@ -185,28 +184,11 @@ TEST(ViewerPageTest, EscapesTheNameAndShipsItsScripts) {
   ::unsetenv("CAROUSEL_WEB_MODULES");
 }
 
-struct Command {
-  int code = -1;
-  std::string out;
-};
-
-Command RunShell(const std::string& command) {
-  FILE* pipe = ::popen((command + " 2>&1").c_str(), "r");
-  Command result;
-  if (pipe == nullptr) return result;
-  char buffer[4096];
-  std::size_t n = 0;
-  while ((n = std::fread(buffer, 1, sizeof buffer, pipe)) > 0) result.out.append(buffer, n);
-  const int status = ::pclose(pipe);
-  result.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return result;
-}
-
 // A small simulated session, made once per CTest run: its lossless and web GLBs.
 std::filesystem::path SmallSession() {
   return testing::SharedFixture("publish-small-session",
                                 [](const std::filesystem::path& out) {
-                                  const Command run = RunShell(
+                                  const testing::ShellResult run = testing::RunShell(
                                       (testing::BinDir() / "carousel").string() +
                                       " run --sim --data " + testing::SharedDataDir().string() +
                                       " --scene shoe --product tiny --out " + out.string() +
@@ -219,9 +201,9 @@ std::filesystem::path SmallSession() {
 
 TEST(GltfValidatorTest, TheSessionsGlbsHaveNoErrorsAndNoWarnings) {
   const std::filesystem::path model = SmallSession() / "model";
-  const Command check =
-      RunShell("node " + std::string(CAROUSEL_SOURCE_DIR) + "/tests/web/validate-gltf.mjs " +
-               (model / "model.glb").string() + " " + (model / "model.web.glb").string());
+  const testing::ShellResult check = testing::RunShell(
+      "node " + std::string(CAROUSEL_SOURCE_DIR) + "/tests/web/validate-gltf.mjs " +
+      (model / "model.glb").string() + " " + (model / "model.web.glb").string());
   EXPECT_EQ(check.code, 0) << check.out;
   EXPECT_THAT(check.out, HasSubstr("model.glb: 0 errors, 0 warnings"));
   EXPECT_THAT(check.out, HasSubstr("model.web.glb: 0 errors, 0 warnings"));
@@ -229,8 +211,9 @@ TEST(GltfValidatorTest, TheSessionsGlbsHaveNoErrorsAndNoWarnings) {
   testing::TempDir dir;
   const std::string bytes = testing::ReadBytes(model / "model.web.glb");
   testing::WriteBytes(dir / "cut.glb", bytes.substr(0, bytes.size() / 3));
-  const Command cut = RunShell("node " + std::string(CAROUSEL_SOURCE_DIR) +
-                               "/tests/web/validate-gltf.mjs " + (dir / "cut.glb").string());
+  const testing::ShellResult cut =
+      testing::RunShell("node " + std::string(CAROUSEL_SOURCE_DIR) +
+                        "/tests/web/validate-gltf.mjs " + (dir / "cut.glb").string());
   EXPECT_EQ(cut.code, 1) << cut.out;
 }
 
@@ -256,10 +239,10 @@ TEST(PublishStageTest, WebGlbScoresAsTheLosslessOneAndIsSmaller) {
 TEST(BrowserTest, ModelViewerShowsTheWebGlbAsOurRendererDoes) {
   const std::filesystem::path model = SmallSession() / "model";
   testing::TempDir out;
-  const Command shots =
-      RunShell("node " + std::string(CAROUSEL_SOURCE_DIR) + "/tests/web/viewer-shots.mjs --site " +
-               model.string() + " --page index.html --out " + out.path().string() +
-               " --width 480 --height 360 --timeout 120");
+  const testing::ShellResult shots = testing::RunShell(
+      "node " + std::string(CAROUSEL_SOURCE_DIR) + "/tests/web/viewer-shots.mjs --site " +
+      model.string() + " --page index.html --out " + out.path().string() +
+      " --width 480 --height 360 --timeout 120");
   ASSERT_EQ(shots.code, 0) << shots.out;
   const auto json = nlohmann::json::parse(testing::ReadBytes(out / "shots.json"));
   ASSERT_EQ(json["shots"].size(), 4u);

@@ -3,9 +3,11 @@
 #include <fcntl.h>
 #include <stdlib.h>
 #include <sys/file.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
@@ -120,6 +122,23 @@ std::filesystem::path BinDir() {
     throw std::runtime_error("bin folder missing: " + dir.string());
   }
   return dir;
+}
+
+std::string CarouselExecutable() { return (BinDir() / "carousel").string(); }
+
+ShellResult RunShell(const std::string& command) {
+  ShellResult result;
+  FILE* pipe = ::popen((command + " 2>&1").c_str(), "r");
+  if (pipe == nullptr) {
+    result.out = "popen failed: " + std::string(std::strerror(errno));
+    return result;
+  }
+  char buffer[4096];
+  std::size_t n = 0;
+  while ((n = std::fread(buffer, 1, sizeof buffer, pipe)) > 0) result.out.append(buffer, n);
+  const int status = ::pclose(pipe);
+  result.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return result;
 }
 
 void WriteBytes(const std::filesystem::path& path, const std::string& bytes) {

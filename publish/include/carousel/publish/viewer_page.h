@@ -59,4 +59,9 @@ void WriteViewerPage(const std::filesystem::path& folder, const ViewerPageOption
 // `text` with &, <, >, " and ' escaped for HTML text and attribute values.
 std::string EscapeHtml(const std::string& text);
 
+// The opening of each of our pages up to and including its <title> (the doctype, <html lang>,
+// <head>, charset, viewport and generator): the caller goes on with the <style> and closes the
+// head. `title` is plain text, escaped here.
+std::string HtmlPageOpening(const std::string& title);
+
 }  // namespace carousel::publish

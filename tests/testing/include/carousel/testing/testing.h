@@ -48,6 +48,18 @@ std::filesystem::path SharedFixture(const std::string& key,
 
 // The folder holding the `carousel` executable of this build ($CAROUSEL_BIN_DIR overrides).
 std::filesystem::path BinDir();
+// BinDir() / "carousel", as a string to start a shell command with.
+std::string CarouselExecutable();
+
+// What a shell command printed (stdout and stderr merged, in order) and its exit status
+// (-1 when it did not exit normally or could not be started).
+struct ShellResult {
+  int code = -1;
+  std::string out;
+};
+// Runs `command` through /bin/sh, as a user would type it: the installed program in a child
+// process, its output captured.
+ShellResult RunShell(const std::string& command);
 
 // Writes `bytes` to `path` (test fixtures: garbage, truncated copies).
 void WriteBytes(const std::filesystem::path& path, const std::string& bytes);
