@@ -89,6 +89,9 @@ void CreateParentFolder(const std::filesystem::path& file);
 // The help text of a described field: "faces of the optimized mesh (>= 100 faces)".
 std::string OptionHelp(const OptionInfo& info);
 
+// --no-publish: the session stops after the texture stage (clears *publish_model).
+void AddNoPublishFlag(CLI::App* command, bool* publish_model);
+
 // Adds a flag per field of `table`, bound to `object` (which must outlive the parse): numbers,
 // words and lists as --name VALUE (lists comma-separated), a bool as --name (or --no-name when
 // it is on by default), enums and composite values through their text. Values are range-

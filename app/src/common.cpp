@@ -66,6 +66,12 @@ std::string OptionHelp(const OptionInfo& info) {
   return help;
 }
 
+void AddNoPublishFlag(CLI::App* command, bool* publish_model) {
+  command->add_flag(
+      "--no-publish", [publish_model](std::int64_t) { *publish_model = false; },
+      "stop after the texture stage (no web GLB, viewer page, catalog images or report page)");
+}
+
 int ExitCodeFor(const std::exception& error) {
   if (dynamic_cast<const Cancelled*>(&error)) return kExitCancelled;
   if (dynamic_cast<const InvalidArgument*>(&error)) return kExitUsage;

@@ -91,9 +91,8 @@ void AddProcessCommand(CLI::App& command, Dispatch& dispatch) {
                  studio::ReconstructOptions::Fields().Only({"faces"}));
   AddOptionFlags(&command, args->options.texture,
                  studio::TextureSessionOptions::Fields().Only({"exclude-views"}));
-  command.add_flag(
-      "--no-publish", [args](std::int64_t) { args->options.publish_model = false; },
-      "stop after the texture stage (no web GLB, no viewer page)");
+  AddOptionFlags(&command, args->options.publish, studio::PublishSessionOptions::Fields());
+  AddNoPublishFlag(&command, &args->options.publish_model);
   dispatch.On(&command, [args](Io& io) { return RunProcess(*args, io); });
 }
 

@@ -102,6 +102,8 @@ void AddRunCommand(CLI::App& command, Dispatch& dispatch) {
                  studio::SimCaptureOptions::Fields().Only(studio::RunSimFieldNames()));
   AddOptionFlags(&command, args->options.texture,
                  studio::TextureSessionOptions::Fields().Only({"exclude-views"}));
+  AddOptionFlags(&command, args->options.publish, studio::PublishSessionOptions::Fields());
+  AddNoPublishFlag(&command, &args->options.publish_model);
   command.add_flag("--force", args->options.force,
                    "start over (the old session is kept beside it)");
   command.add_flag("--calibration", args->calibration,

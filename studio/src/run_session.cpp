@@ -8,6 +8,7 @@
 #include "carousel/core/error.h"
 #include "carousel/core/file_util.h"
 #include "carousel/core/logging.h"
+#include "carousel/core/options_json.h"
 #include "carousel/core/timer.h"
 #include "carousel/studio/capture.h"
 #include "carousel/studio/pipeline.h"
@@ -45,7 +46,9 @@ json RunToJson(const RunOptions& o) {
         {"scale", s.placement.scale},
         {"yaw_rad", s.placement.yaw_rad}}},
       {"texture",
-       {{"exclude_views", o.texture.grouping.exclude_views}, {"size", o.texture.atlas.size.size}}}};
+       {{"exclude_views", o.texture.grouping.exclude_views}, {"size", o.texture.atlas.size.size}}},
+      {"publish", OptionsToJson(PublishSessionOptions::Fields(), o.publish)},
+      {"publish_model", o.publish_model}};
   // The rig as it was when the session started: a resume uses the same devices and plan even
   // if the rig file changed meanwhile.
   if (o.hardware) run["rig"] = json::parse(RigConfigToJsonText(*o.hardware));
@@ -85,6 +88,11 @@ RunOptions RunFromJson(const std::filesystem::path& path) {
     o.sim.placement.yaw_rad = s.at("yaw_rad").get<double>();
     o.texture.grouping.exclude_views = j.at("texture").at("exclude_views").get<std::vector<int>>();
     o.texture.atlas.size.size = j.at("texture").at("size").get<int>();
+    // Sessions started before publish options were recorded publish with today's defaults.
+    if (j.contains("publish")) {
+      OptionsFromJson(PublishSessionOptions::Fields(), j["publish"], &o.publish, path);
+    }
+    o.publish_model = j.value("publish_model", true);
     if (j.contains("calibration")) o.calibration = CalibrationPlanFromJson(j["calibration"], path);
     if (j.contains("calibration_file"))
       o.calibration_file = path.parent_path() / j["calibration_file"].get<std::string>();
@@ -139,8 +147,12 @@ RunResult Continue(const std::filesystem::path& folder, const RunOptions& option
                                          ? recon::SilhouetteMethod::kDifference
                                          : recon::SilhouetteMethod::kKey;
   }
-  const ProcessResult processed = ProcessSession(
-      folder, session, {.reconstruct = reconstruct, .texture = options.texture}, progress);
+  const ProcessResult processed = ProcessSession(folder, session,
+                                                 {.reconstruct = reconstruct,
+                                                  .texture = options.texture,
+                                                  .publish = options.publish,
+                                                  .publish_model = options.publish_model},
+                                                 progress);
   result.reconstructed = processed.reconstruct.has_value();
   result.textured = processed.texture.has_value();
   if (processed.texture) result.texture = *processed.texture;
@@ -161,6 +173,7 @@ void RunOptions::Validate() const {
   }
   reconstruct.Validate();
   texture.Validate();
+  publish.Validate();
   if (calibration) calibration->Validate();
   CAROUSEL_THROW_IF(calibration && !calibration_file.empty(), InvalidArgument,
                     "a calibration session does not take a calibration file");

@@ -1,11 +1,12 @@
 // Options described once (core/options.h): range checks that name the flag, nested tables,
-// choices, and malformed tables refused.
+// choices, malformed tables refused, and options to and from JSON.
 #include "carousel/core/options.h"
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include "carousel/core/error.h"
+#include "carousel/core/options_json.h"
 
 namespace carousel {
 namespace {
@@ -94,6 +95,47 @@ TEST(OptionsTest, NestedFieldsReachTheirMembers) {
   EXPECT_EQ(Outer::Fields().Only({"size", "faces"}).fields().size(), 2u);
   EXPECT_EQ(Outer::Fields().Without({"size"}).fields().size(), 4u);
   EXPECT_THROW(Outer::Fields().Find("nothing"), std::logic_error);
+}
+
+TEST(OptionsJsonTest, RoundTripsEveryKindOfFieldByItsFlagName) {
+  Outer o;
+  o.inner.faces = 777;
+  o.inner.fraction = 0.25;
+  o.inner.mode = Mode::kFast;
+  o.size = 2048;
+  o.angles = {10.0, 45.5};
+  const nlohmann::json j = OptionsToJson(Outer::Fields(), o);
+  EXPECT_EQ(j.at("faces"), 777);
+  EXPECT_EQ(j.at("mode"), "fast");
+  EXPECT_EQ(j.at("angles"), nlohmann::json::array({10.0, 45.5}));
+  Outer back;
+  OptionsFromJson(Outer::Fields(), nlohmann::json::parse(j.dump()), &back, "run.json");
+  EXPECT_EQ(back.inner.faces, 777);
+  EXPECT_EQ(back.inner.fraction, 0.25);
+  EXPECT_EQ(back.inner.mode, Mode::kFast);
+  EXPECT_EQ(back.size, 2048);
+  EXPECT_EQ(back.angles, o.angles);
+}
+
+TEST(OptionsJsonTest, MissingFieldsKeepTheirDefaultsAndBadValuesNameTheFileAndField) {
+  Outer o;
+  OptionsFromJson(Outer::Fields(), nlohmann::json{{"size", 512}}, &o, "run.json");
+  EXPECT_EQ(o.size, 512);
+  EXPECT_EQ(o.inner.faces, 4500);
+  EXPECT_EQ(o.inner.mode, Mode::kGood);
+  EXPECT_THAT(
+      [&] {
+        OptionsFromJson(Outer::Fields(), {{"faces", "many"}}, &o, "run.json");
+      },
+      ThrowsMessage<FormatError>(
+          ::testing::AllOf(HasSubstr("run.json"), HasSubstr("option 'faces'"))));
+  EXPECT_THAT(
+      [&] {
+        OptionsFromJson(Outer::Fields(), {{"mode", "best"}}, &o, "run.json");
+      },
+      ThrowsMessage<FormatError>(HasSubstr("--mode must be fast or good")));
+  EXPECT_THROW(OptionsFromJson(Outer::Fields(), nlohmann::json::array(), &o, "run.json"),
+               FormatError);
 }
 
 TEST(OptionsTest, MalformedTablesAreRefused) {

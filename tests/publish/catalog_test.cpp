@@ -1,7 +1,6 @@
 // publish/'s catalog images (cut-outs, the spin as an animated WebP, the zipped 360° set), the
 // report page and the static catalog site: units on synthetic images, then the files the
 // publish stage wrote for small simulated sessions, checked on their pixels.
-#include <sys/wait.h>
 
 #include <cmath>
 #include <cstdio>
@@ -248,36 +247,18 @@ TEST(ReportPageTest, IslandsPaintAndTheHistogramAndPageSayWhatTheyShow) {
 
 // --- the publish stage's files of simulated sessions -----------------------------------------
 
-struct Command {
-  int code = -1;
-  std::string out;
-};
-
-Command RunShell(const std::string& command) {
-  FILE* pipe = ::popen((command + " 2>&1").c_str(), "r");
-  Command result;
-  if (pipe == nullptr) return result;
-  char buffer[4096];
-  std::size_t n = 0;
-  while ((n = std::fread(buffer, 1, sizeof buffer, pipe)) > 0) result.out.append(buffer, n);
-  const int status = ::pclose(pipe);
-  result.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return result;
-}
-
-std::string Carousel() { return (testing::BinDir() / "carousel").string(); }
-
 // The small session publish_test makes (the same fixture key: one run per CTest run).
 std::filesystem::path SmallSession() {
-  return testing::SharedFixture(
-             "publish-small-session",
-             [](const std::filesystem::path& out) {
-               const Command run =
-                   RunShell(Carousel() + " run --sim --data " + testing::SharedDataDir().string() +
-                            " --scene shoe --product tiny --out " + out.string() +
-                            " --views 8 --size 648x432 --exclude-views 3");
-               if (run.code != 0) throw IoError(out, "carousel run failed:\n" + run.out);
-             }) /
+  return testing::SharedFixture("publish-small-session",
+                                [](const std::filesystem::path& out) {
+                                  const testing::ShellResult run = testing::RunShell(
+                                      testing::CarouselExecutable() + " run --sim --data " +
+                                      testing::SharedDataDir().string() +
+                                      " --scene shoe --product tiny --out " + out.string() +
+                                      " --views 8 --size 648x432 --exclude-views 3");
+                                  if (run.code != 0)
+                                    throw IoError(out, "carousel run failed:\n" + run.out);
+                                }) /
          "tiny";
 }
 
@@ -383,16 +364,34 @@ TEST(CatalogImagesTest, CutOutsAreThePhotosThroughTheirMasksOnWhite) {
   }
 }
 
+// `carousel run` takes the publish stage's flags and records them in run.json (a resume
+// publishes the same way).
 TEST(CatalogImagesTest, ASessionWith24StopsMakesItsSetFromThePhotos) {
   testing::TempDir dir;
-  const Command run = RunShell(
-      Carousel() + " run --sim --data " + testing::SharedDataDir().string() +
-      " --scene shoe --product ring24 --out " + dir.path().string() + " --views 24 --size 324x216");
+  const testing::ShellResult run = testing::RunShell(
+      testing::CarouselExecutable() + " run --sim --data " + testing::SharedDataDir().string() +
+      " --scene shoe --product ring24 --out " + dir.path().string() +
+      " --views 24 --size 324x216 --spin-size 240 --cutout-backdrop transparent --cutout-size 256"
+      " --no-report-page");
   ASSERT_EQ(run.code, 0) << run.out;
   const std::filesystem::path session = dir / "ring24";
   const nlohmann::json summary = ReadJson(session / "model/publish.json");
   ASSERT_EQ(summary["catalog"]["spin_source"], "photos");
+  EXPECT_EQ(summary["catalog"]["backdrop"], "transparent");
+  EXPECT_FALSE(std::filesystem::exists(session / "model/report.html"));
+  const nlohmann::json recorded = ReadJson(session / "run.json");
+  EXPECT_EQ(recorded["publish"]["spin-size"], 240);
+  EXPECT_EQ(recorded["publish"]["cutout-backdrop"], "transparent");
+  EXPECT_EQ(recorded["publish"]["report-page"], false);
   const nlohmann::json manifest = ReadJson(session / "session.json");
+  // A transparent cut-out is a PNG with an alpha channel.
+  const std::string stem =
+      std::filesystem::path(manifest["views"][0]["image"].get<std::string>()).stem().string();
+  const cv::Mat cut =
+      cv::imread((session / "model/cutouts" / (stem + ".png")).string(), cv::IMREAD_UNCHANGED);
+  ASSERT_FALSE(cut.empty()) << stem;
+  EXPECT_EQ(cut.channels(), 4);
+  EXPECT_EQ(cut.cols, 256);
   const std::vector<ZipEntry> set = ReadZip(session / "model/360.zip");
   ASSERT_EQ(set.size(), 24u);
   // Entry k is the cut-out of the photo at the k-th table angle.
@@ -402,12 +401,13 @@ TEST(CatalogImagesTest, ASessionWith24StopsMakesItsSetFromThePhotos) {
   std::sort(by_angle.begin(), by_angle.end());
   for (const int k : {0, 7, 23}) {
     const nlohmann::json& view = manifest["views"][by_angle[k].second];
-    const cv::Mat expected =
-        CutOut(ReadImage(session / view["image"].get<std::string>()),
-               ReadMask(session / view["mask"].get<std::string>()), {.size = 720});
-    const cv::Mat jpeg = Decode(set[k].bytes);
-    ASSERT_EQ(jpeg.size(), expected.size());
-    EXPECT_GT(cv::PSNR(jpeg, expected), 33.0) << k;
+    const cv::Mat expected = CutOut(ReadImage(session / view["image"].get<std::string>()),
+                                    ReadMask(session / view["mask"].get<std::string>()),
+                                    {.backdrop = CutoutBackdrop::kTransparent, .size = 240});
+    const cv::Mat image = cv::imdecode(set[k].bytes, cv::IMREAD_UNCHANGED);
+    ASSERT_EQ(image.size(), expected.size());
+    ASSERT_EQ(image.type(), expected.type());
+    EXPECT_GT(cv::PSNR(image, expected), 33.0) << k;
   }
 }
 
@@ -457,9 +457,10 @@ TEST(SiteTest, TheCatalogLinksEveryProductAndPublishingTwiceChangesNothing) {
   for (const char* name : {"shoe-a", "shoe b"})
     std::filesystem::copy(SmallSession(), dir / name, std::filesystem::copy_options::recursive);
   const std::filesystem::path site = dir / "site";
-  const std::string publish = Carousel() + " publish '" + (dir / "shoe-a").string() + "' '" +
-                              (dir / "shoe b").string() + "' --out " + site.string();
-  const Command first = RunShell(publish);
+  const std::string publish = testing::CarouselExecutable() + " publish '" +
+                              (dir / "shoe-a").string() + "' '" + (dir / "shoe b").string() +
+                              "' --out " + site.string();
+  const testing::ShellResult first = testing::RunShell(publish);
   ASSERT_EQ(first.code, 0) << first.out;
   EXPECT_THAT(first.out, HasSubstr("lists 2 products"));
   const std::string index = testing::ReadBytes(site / "index.html");
@@ -482,7 +483,7 @@ TEST(SiteTest, TheCatalogLinksEveryProductAndPublishingTwiceChangesNothing) {
   // Twice: the same bytes, not one file rewritten; a stray file in a product folder goes.
   const auto times = Times(site);
   testing::WriteBytes(site / "shoe-a/stale.jpg", "old");
-  const Command second = RunShell(publish);
+  const testing::ShellResult second = testing::RunShell(publish);
   ASSERT_EQ(second.code, 0) << second.out;
   EXPECT_THAT(second.out, HasSubstr("0 files written"));
   EXPECT_FALSE(std::filesystem::exists(site / "shoe-a/stale.jpg"));
@@ -520,22 +521,25 @@ TEST(SiteTest, BadInputIsNamedAndNothingPublishedIsLost) {
   std::filesystem::copy(SmallSession(), dir / "s", std::filesystem::copy_options::recursive);
   // An unwritable site folder: its parent is a file.
   testing::WriteBytes(dir / "file", "x");
-  const Command unwritable = RunShell(Carousel() + " publish " + (dir / "s").string() + " --out " +
-                                      (dir / "file/site").string());
+  const testing::ShellResult unwritable =
+      testing::RunShell(testing::CarouselExecutable() + " publish " + (dir / "s").string() +
+                        " --out " + (dir / "file/site").string());
   EXPECT_NE(unwritable.code, 0);
   EXPECT_THAT(unwritable.out, HasSubstr((dir / "file/site").string()));
   EXPECT_THAT(unwritable.out, HasSubstr("site folder"));
   // A GLB without a texture.
   const std::string web_before = testing::ReadBytes(dir / "s/model/model.web.glb");
   DropTexture(dir / "s/model/model.glb");
-  const Command untextured = RunShell(Carousel() + " publish " + (dir / "s").string());
+  const testing::ShellResult untextured =
+      testing::RunShell(testing::CarouselExecutable() + " publish " + (dir / "s").string());
   EXPECT_NE(untextured.code, 0);
   EXPECT_THAT(untextured.out, HasSubstr("model.glb"));
   EXPECT_THAT(untextured.out, HasSubstr("no base colour texture"));
   EXPECT_EQ(testing::ReadBytes(dir / "s/model/model.web.glb"), web_before);
   // A session without a model.
   std::filesystem::remove(dir / "s/model/model.glb");
-  const Command missing = RunShell(Carousel() + " publish " + (dir / "s").string());
+  const testing::ShellResult missing =
+      testing::RunShell(testing::CarouselExecutable() + " publish " + (dir / "s").string());
   EXPECT_NE(missing.code, 0);
   EXPECT_THAT(missing.out, HasSubstr("model.glb"));
   EXPECT_THAT(missing.out, HasSubstr("carousel texture"));

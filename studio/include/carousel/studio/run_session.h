@@ -45,7 +45,9 @@ struct RunOptions {
   std::filesystem::path calibration_file;
   ReconstructOptions reconstruct;
   TextureSessionOptions texture;
-  bool force = false;  // replace an existing session of that name
+  PublishSessionOptions publish;  // recorded in run.json: a resume publishes the same way
+  bool publish_model = true;      // the publish stage after texture
+  bool force = false;             // replace an existing session of that name
   void Validate() const;
 };
 
