@@ -33,6 +33,9 @@ void AddImportCommand(CLI::App& command, Dispatch& dispatch) {
       ->capture_default_str();
   command.add_option("--product", args->options.product, "product name");
   command.add_flag("--force", args->options.overwrite, "replace an existing session folder");
+  command.add_flag("--keep-frame", args->options.keep_frame,
+                   "keep the dataset's world frame (default: stand it upright, +Z up, the origin "
+                   "where the cameras look)");
   dispatch.On(&command, [args](Io& io) {
     using Options = studio::ImportOptions;
     args->options.format =
@@ -44,7 +47,8 @@ void AddImportCommand(CLI::App& command, Dispatch& dispatch) {
     CliProgress cli(io.err);
     const studio::ImportResult result =
         studio::ImportDataset(args->options, args->out, cli.progress());
-    io.out << "session " << result.session.string() << ": " << result.views << " views imported\n";
+    io.out << "session " << result.session.string() << ": " << result.views
+           << " views imported; world frame " << result.frame << "\n";
     return kExitOk;
   });
 }

@@ -2,12 +2,17 @@
 
 #include <cmath>
 #include <map>
+#include <numbers>
+#include <optional>
 
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 #include <Eigen/SVD>
 
 #include "carousel/core/error.h"
 #include "carousel/core/file_util.h"
 #include "carousel/core/image_io.h"
+#include "carousel/core/logging.h"
 #include "carousel/core/text.h"
 #include "carousel/studio/session.h"
 
@@ -232,6 +237,64 @@ void ImportOptions::Validate() const {
                     "a COLMAP import needs the photos' folder (--images)");
 }
 
+std::optional<UprightFrameResult> UprightFrame(const std::vector<CameraModel>& cameras) {
+  if (cameras.size() < 3) return std::nullopt;
+  std::vector<Eigen::Vector3d> centres, axes, ups;
+  for (const CameraModel& camera : cameras) {
+    const Eigen::Matrix3d& r = camera.cam_from_world.rotation;
+    centres.push_back(-(r.transpose() * camera.cam_from_world.translation));
+    axes.push_back(r.row(2).transpose());  // the optical axis (camera +z) in the world
+    ups.push_back(-r.row(1).transpose());  // the photo's up (camera -y) in the world
+  }
+  const double n = static_cast<double>(cameras.size());
+  // The point nearest every optical axis: sum (I - d d^T) (x - c) = 0.
+  Eigen::Matrix3d normal_matrix = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
+  for (std::size_t i = 0; i < centres.size(); ++i) {
+    const Eigen::Matrix3d p = Eigen::Matrix3d::Identity() - axes[i] * axes[i].transpose();
+    normal_matrix += p;
+    rhs += p * centres[i];
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> axes_spread(normal_matrix);
+  if (axes_spread.eigenvalues()(0) < 1e-3 * n) return std::nullopt;  // all axes parallel
+  const Eigen::Vector3d target = normal_matrix.ldlt().solve(rhs);
+
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector3d& c : centres) mean += c / n;
+  Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+  for (const Eigen::Vector3d& c : centres) scatter += (c - mean) * (c - mean).transpose() / n;
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> spread(scatter);
+  const Eigen::Vector3d lambda = spread.eigenvalues();                        // ascending
+  if (lambda(2) <= 0.0 || lambda(1) < 1e-6 * lambda(2)) return std::nullopt;  // one point, a line
+  Eigen::Vector3d up;
+  Eigen::Vector3d mean_up = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector3d& u : ups) mean_up += u / n;
+  UprightFrameResult result;
+  if (lambda(0) < 0.5 * lambda(1)) {
+    // A ring, rings about one axis, or a dome: the least spread direction is the axis.
+    up = spread.eigenvectors().col(0).normalized();
+    result.basis = "the axis of the camera ring";
+  } else if (mean_up.norm() > 0.5) {
+    up = mean_up.normalized();
+    result.basis = "the photos' mean up direction";
+  } else {
+    return std::nullopt;
+  }
+  double look = 0.0, photo_up = 0.0;
+  for (std::size_t i = 0; i < axes.size(); ++i) {
+    look += axes[i].dot(up) / n;
+    photo_up += ups[i].dot(up) / n;
+  }
+  const double kLevel = std::sin(2.0 * std::numbers::pi / 180.0);
+  if (look > kLevel || (std::abs(look) <= kLevel && photo_up < 0.0)) up = -up;
+  result.basis += std::abs(look) > kLevel ? ", the cameras looking down on the object"
+                                          : ", pointing where the photos' up does";
+  const Eigen::Matrix3d rotation =
+      Eigen::Quaterniond::FromTwoVectors(up, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  result.world_from_dataset = Rigid3d(rotation, -(rotation * target));
+  return result;
+}
+
 ImportResult ImportDataset(const ImportOptions& options,
                            const std::filesystem::path& session_folder, Progress& progress) {
   options.Validate();
@@ -252,6 +315,23 @@ ImportResult ImportDataset(const ImportOptions& options,
       view.camera.Validate();
     } catch (const InvalidArgument& e) {
       throw FormatError(options.source, view.name + ": " + e.what());
+    }
+  }
+  std::string frame = "kept";
+  std::optional<Rigid3d> world_from_dataset;
+  if (!options.keep_frame) {
+    std::vector<CameraModel> cameras;
+    for (const DatasetView& view : views) cameras.push_back(view.camera);
+    if (const auto upright = UprightFrame(cameras)) {
+      world_from_dataset = upright->world_from_dataset;
+      frame = "upright: +Z from " + upright->basis;
+      const Rigid3d dataset_from_world = world_from_dataset->Inverse();
+      for (DatasetView& view : views)
+        view.camera.cam_from_world = view.camera.cam_from_world * dataset_from_world;
+    } else {
+      frame = "kept (the cameras fix no up axis)";
+      CAROUSEL_LOG_WARN(options.source.string()
+                        << ": the cameras fix no up axis; the dataset's own frame is kept");
     }
   }
   progress.EndStage();
@@ -275,6 +355,7 @@ ImportResult ImportDataset(const ImportOptions& options,
   session.created_utc = NowUtc();
   session.source = "import:" + kind;
   session.frame = "dataset";
+  session.world_from_dataset = world_from_dataset;
   progress.BeginStage("copy photos");
   for (std::size_t i = 0; i < views.size(); ++i) {
     progress.CheckCancelled();
@@ -294,7 +375,7 @@ ImportResult ImportDataset(const ImportOptions& options,
   session.stages["capture"] = "done";
   WriteSessionManifest(folder.staging(), session);
   folder.Commit();
-  return {folder.target(), static_cast<int>(views.size())};
+  return {folder.target(), static_cast<int>(views.size()), frame};
 }
 
 }  // namespace carousel::studio

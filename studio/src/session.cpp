@@ -60,6 +60,8 @@ void WriteSessionManifest(const std::filesystem::path& folder, const Session& se
                    {"frame", session.frame},
                    {"views", views},
                    {"stages", session.stages}};
+  if (session.world_from_dataset)
+    manifest["world_from_dataset"] = Rigid3dToJson(*session.world_from_dataset);
   if (!session.stage_inputs.empty()) manifest["stage_inputs"] = session.stage_inputs;
   if (!session.stage_seconds.empty()) manifest["stage_seconds"] = session.stage_seconds;
   if (!session.ground_truth.empty()) {
@@ -92,6 +94,8 @@ Session ReadSession(const std::filesystem::path& folder) {
   if (session.frame != "turntable" && session.frame != "dataset") {
     read.Fail("frame must be 'turntable' or 'dataset', got '" + session.frame + "'");
   }
+  if (const auto transform = read.OptionalObject("world_from_dataset"))
+    session.world_from_dataset = Rigid3dFromJson(*transform);
   for (const JsonReader& entry : read.Array("views")) {
     SessionView view;
     view.image = entry.RelativePath("image", kFolder);

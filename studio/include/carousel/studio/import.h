@@ -10,13 +10,22 @@
 //     SIMPLE_RADIAL, RADIAL, OPENCV and FULL_OPENCV (rational terms zero). COLMAP puts the
 //     centre of the top-left pixel at (0.5, 0.5); the import shifts the principal point by
 //     -0.5 px to OpenCV's convention.
-// Imported sessions use the dataset's world frame (manifest frame "dataset").
+// Imported sessions are not on our turntable (manifest frame "dataset": no plate, no floor), but
+// the import stands them upright in our convention: +Z along the capture's up axis, the origin
+// where the cameras look (UprightFrame below), so that renders, the hero shot, the spin and the
+// Y-up OBJ/GLB show the object standing. The transform is kept in session.json
+// ("world_from_dataset") to map points of the dataset's own frame; --keep-frame keeps the
+// dataset's axes as they are.
 #pragma once
 
 #include <filesystem>
+#include <optional>
 #include <string>
+#include <vector>
 
+#include "carousel/core/camera_model.h"
 #include "carousel/core/progress.h"
+#include "carousel/core/rigid3.h"
 
 namespace carousel::studio {
 
@@ -29,15 +38,31 @@ struct ImportOptions {
   // How photos enter the session: copied (default), hard-linked (falls back to a copy across
   // file systems) or symbolically linked.
   enum class Transfer { kCopy, kHardLink, kSymlink } transfer = Transfer::kCopy;
-  std::string product;     // empty = the dataset's folder name
-  bool overwrite = false;  // replace an existing session folder
+  std::string product;      // empty = the dataset's folder name
+  bool overwrite = false;   // replace an existing session folder
+  bool keep_frame = false;  // keep the dataset's world frame instead of standing it upright
   void Validate() const;
 };
 
 struct ImportResult {
   std::filesystem::path session;
   int views = 0;
+  std::string frame;  // how the world frame was chosen (UprightFrameResult::basis, or "kept")
 };
+
+struct UprightFrameResult {
+  Rigid3d world_from_dataset;  // maps the dataset's points into the upright frame
+  std::string basis;           // in words: which evidence fixed the up axis and its sign
+};
+
+// The upright frame of a capture, from its cameras alone. Up is the axis of the ring the camera
+// centres lie on (the normal of their best-fit plane; with the centres spread in 3D, as on a
+// dome, the mean of the cameras' image-up directions instead). Its sign makes the cameras look
+// down on the object, as studio cameras do; a ring looking straight across takes the sign the
+// photos' up direction agrees with (cameras may be rolled, so that comes second). The origin is
+// the point nearest every optical axis. std::nullopt when the cameras fix no axis (fewer than 3,
+// or all on a line, or looking every way).
+std::optional<UprightFrameResult> UprightFrame(const std::vector<CameraModel>& cameras);
 
 // \throw IoError (missing file or photo, target exists), FormatError (malformed line, naming
 //        the file and line), InvalidArgument; nothing is left at the target on failure.

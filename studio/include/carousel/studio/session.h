@@ -9,13 +9,15 @@
 //
 // Every path in the manifest is relative to the session folder. Each view carries the exact
 // camera used: intrinsics, distortion, image size and cam_from_world, plus the table angle.
-// World frame: the turntable frame ("turntable"), or the dataset's own frame ("dataset") for
-// imported datasets whose object does not sit on our turntable.
+// World frame: the turntable frame ("turntable"), or for imported datasets whose object does not
+// sit on our turntable "dataset": +Z up as the import found it, with world_from_dataset mapping
+// the dataset's own frame into it (import.h).
 // Format version 1; readers refuse newer major versions.
 #pragma once
 
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -57,6 +59,9 @@ struct Session {
   std::string created_utc;  // ISO 8601
   std::string source;       // "sim:<scene>", "import:middlebury", "capture", ...
   std::string frame = "turntable";
+  // Imported sessions: how the import stood the dataset upright (points of the dataset's own
+  // frame map into the session's world through it); unset when the frame is the dataset's own.
+  std::optional<Rigid3d> world_from_dataset;
   std::vector<SessionView> views;
   GroundTruth ground_truth;
   std::map<std::string, std::string> stages;  // stage name -> state ("done", ...)
