@@ -132,10 +132,15 @@ void RemoveStale(const std::filesystem::path& model_folder, const std::string& s
   for (const auto& p : stale) std::filesystem::remove(p, ec);
 }
 
-// The elevation of the session's first camera above the model's centre (turntable frame),
-// degrees; 15 when the session has no turntable frame.
+// Whether the session's +Z is up: the turntable's frame, or a dataset the import stood upright.
+bool ZIsUp(const Session& session) {
+  return session.frame == "turntable" || session.world_from_dataset.has_value();
+}
+
+// The elevation of the session's first camera above the model's centre, degrees; 15 when the
+// session's frame has no up (ZIsUp).
 double CameraElevationDeg(const Session& session, const texture::TexturedModel& model) {
-  if (session.frame != "turntable" || session.views.empty()) return 15.0;
+  if (!ZIsUp(session) || session.views.empty()) return 15.0;
   Eigen::AlignedBox3d box;
   for (const Eigen::Vector3d& p : model.positions) box.extend(p);
   const int camera = session.views.front().camera;
@@ -175,6 +180,31 @@ std::vector<int> PhotoSpin(const Session& session, int frames, int* camera_out) 
     }
   }
   return {};
+}
+
+// The photo of `camera` turned by quarter turns so that the world's up at the model's centre
+// points up in it: a camera mounted on its side (or upside down) gives upright cut-outs. Photos
+// looking nearly straight down, and sessions without an up, are left as they are.
+cv::Mat Upright(const cv::Mat& image, const Session& session, const CameraModel& camera,
+                const Eigen::AlignedBox3d& box, int* turned) {
+  if (!ZIsUp(session)) return image;
+  const Eigen::Matrix3d& r = camera.cam_from_world.rotation;
+  if (std::abs(r(2, 2)) > std::cos(20.0 * kDeg)) return image;  // looking down (or up) along Z
+  const auto a = camera.Project(box.center());
+  const auto b = camera.Project(box.center() + 0.25 * box.sizes().z() * Eigen::Vector3d::UnitZ());
+  if (!a || !b || (*b - *a).norm() < 1e-6) return image;
+  const Eigen::Vector2d up = *b - *a;  // the world's up in the photo (image y points down)
+  cv::Mat out;
+  if (-up.y() >= std::abs(up.x())) return image;
+  if (up.y() >= std::abs(up.x())) {
+    cv::rotate(image, out, cv::ROTATE_180);
+  } else if (up.x() > 0.0) {
+    cv::rotate(image, out, cv::ROTATE_90_COUNTERCLOCKWISE);  // up points right: turn it up
+  } else {
+    cv::rotate(image, out, cv::ROTATE_90_CLOCKWISE);
+  }
+  ++*turned;
+  return out;
 }
 
 cv::Mat ToBgra(const texture::ModelRendering& r) {
@@ -348,7 +378,9 @@ PublishSessionResult PublishSession(const std::filesystem::path& session_folder,
   progress.Report(0.45);
   phase("hero");
 
-  // Cut-outs of every photo with a mask.
+  // Cut-outs of every photo with a mask, standing upright.
+  Eigen::AlignedBox3d model_box;
+  for (const Eigen::Vector3d& p : model.positions) model_box.extend(p);
   const bool transparent = options.backdrop == publish::CutoutBackdrop::kTransparent;
   const std::string extension = transparent ? ".png" : ".jpg";
   publish::CutoutOptions cut{
@@ -359,10 +391,11 @@ PublishSessionResult PublishSession(const std::filesystem::path& session_folder,
       const std::string name =
           "cutouts/" + std::filesystem::path(session.views[i].image).stem().string() + extension;
       try {
+        const cv::Mat image =
+            Upright(publish::CutOut(views[i].Image(), views[i].Mask(), cut), session,
+                    views[i].camera(), model_box, &result.cutouts_turned);
         Emit(model_folder, name,
-             publish::EncodeCatalogImage(publish::CutOut(views[i].Image(), views[i].Mask(), cut),
-                                         options.jpeg_quality, model_folder / name),
-             &files);
+             publish::EncodeCatalogImage(image, options.jpeg_quality, model_folder / name), &files);
         ++result.cutouts;
       } catch (const InvalidArgument&) {
         // A photo whose mask holds no object (the product out of frame) has no cut-out.
@@ -388,7 +421,9 @@ PublishSessionResult PublishSession(const std::filesystem::path& session_folder,
     for (int k = 0; k < options.spin_frames; ++k) {
       if (result.spin_from_photos) {
         const View& v = views[photo_views[k]];
-        frames.push_back(publish::CutOut(v.Image(), v.Mask(), cut));
+        int turned = 0;
+        frames.push_back(Upright(publish::CutOut(v.Image(), v.Mask(), cut), session, v.camera(),
+                                 model_box, &turned));
       } else {
         // The camera goes round against the table's turn, as the photos see it.
         shot.azimuth_deg = hero.azimuth_deg - k * 360.0 / options.spin_frames;
@@ -526,6 +561,7 @@ PublishSessionResult PublishSession(const std::filesystem::path& session_folder,
                            {"mean_psnr_db_web", result.mean_psnr_web_db}};
   }
   summary["catalog"] = {{"cutouts", result.cutouts},
+                        {"cutouts_turned_upright", result.cutouts_turned},
                         {"backdrop", publish::CutoutBackdropName(options.backdrop)},
                         {"spin_frames", result.spin_frames},
                         {"spin_source", result.spin_frames == 0   ? "none"

@@ -247,19 +247,10 @@ TEST(ReportPageTest, IslandsPaintAndTheHistogramAndPageSayWhatTheyShow) {
 
 // --- the publish stage's files of simulated sessions -----------------------------------------
 
-// The small session publish_test makes (the same fixture key: one run per CTest run).
+// The small session publish_test and catalog_test share (one run per CTest run).
 std::filesystem::path SmallSession() {
-  return testing::SharedFixture("publish-small-session",
-                                [](const std::filesystem::path& out) {
-                                  const testing::ShellResult run = testing::RunShell(
-                                      testing::CarouselExecutable() + " run --sim --data " +
-                                      testing::SharedDataDir().string() +
-                                      " --scene shoe --product tiny --out " + out.string() +
-                                      " --views 8 --size 648x432 --exclude-views 3");
-                                  if (run.code != 0)
-                                    throw IoError(out, "carousel run failed:\n" + run.out);
-                                }) /
-         "tiny";
+  return testing::SimulatedSession("publish-small-session", "tiny",
+                                   "--scene shoe --views 8 --size 648x432 --exclude-views 3");
 }
 
 nlohmann::json ReadJson(const std::filesystem::path& path) {
@@ -409,6 +400,66 @@ TEST(CatalogImagesTest, ASessionWith24StopsMakesItsSetFromThePhotos) {
     ASSERT_EQ(image.type(), expected.type());
     EXPECT_GT(cv::PSNR(image, expected), 33.0) << k;
   }
+}
+
+// A camera mounted on its side: the session's photos and masks turned a quarter clockwise, its
+// cameras turned with them. The cut-outs come out upright, the same as the upright session's.
+TEST(CatalogImagesTest, PhotosOfASidewaysCameraGiveUprightCutouts) {
+  testing::TempDir dir;
+  const std::filesystem::path session = dir / "sideways";
+  std::filesystem::copy(SmallSession(), session, std::filesystem::copy_options::recursive);
+  std::filesystem::remove_all(session / "model/cutouts");
+  nlohmann::json manifest = ReadJson(session / "session.json");
+  for (nlohmann::json& view : manifest["views"]) {
+    for (const char* key : {"image", "mask"}) {
+      const std::filesystem::path file = session / view[key].get<std::string>();
+      cv::Mat image = cv::imread(file.string(), cv::IMREAD_UNCHANGED);
+      ASSERT_FALSE(image.empty()) << file;
+      cv::rotate(image, image, cv::ROTATE_90_CLOCKWISE);
+      ASSERT_TRUE(cv::imwrite(file.string(), image, {cv::IMWRITE_JPEG_QUALITY, 100}));
+    }
+    view.erase("sha256");
+    // Pixel (u, v) moves to (H - 1 - v, u): x' = -y, y' = x in the camera frame.
+    nlohmann::json& c = view["camera_model"];
+    const int width = c["width"], height = c["height"];
+    const double cx = c["cx"], cy = c["cy"], fx = c["fx"], fy = c["fy"];
+    c["width"] = height;
+    c["height"] = width;
+    c["fx"] = fy;
+    c["fy"] = fx;
+    c["cx"] = height - 1 - cy;
+    c["cy"] = cx;
+    std::vector<double> r = c["cam_from_world"]["rotation_row_major"];
+    std::vector<double> t = c["cam_from_world"]["translation"];
+    c["cam_from_world"]["rotation_row_major"] = {-r[3], -r[4], -r[5], r[0], r[1],
+                                                 r[2],  r[6],  r[7],  r[8]};
+    c["cam_from_world"]["translation"] = {-t[1], t[0], t[2]};
+  }
+  testing::WriteBytes(session / "session.json", manifest.dump(2));
+  const testing::ShellResult run = testing::RunShell(testing::CarouselExecutable() + " publish " +
+                                                     session.string() + " --no-report-page");
+  ASSERT_EQ(run.code, 0) << run.out;
+  const nlohmann::json summary = ReadJson(session / "model/publish.json");
+  const int cutouts = summary["catalog"]["cutouts"];
+  EXPECT_EQ(cutouts, static_cast<int>(manifest["views"].size()));
+  EXPECT_EQ(summary["catalog"]["cutouts_turned_upright"], cutouts);
+  for (const auto& view : manifest["views"]) {
+    const std::string name =
+        std::filesystem::path(view["image"].get<std::string>()).stem().string() + ".jpg";
+    const cv::Mat upright = cv::imread((SmallSession() / "model/cutouts" / name).string());
+    const cv::Mat turned = cv::imread((session / "model/cutouts" / name).string());
+    ASSERT_EQ(turned.size(), upright.size()) << name;
+    // Compared at 1/8 size (the crop may differ by a source pixel, 2.5 px of the cut-out), and
+    // against the cut-out turned the wrong way.
+    cv::Mat a, b, wrong;
+    cv::resize(turned, a, upright.size() / 8, 0, 0, cv::INTER_AREA);
+    cv::resize(upright, b, upright.size() / 8, 0, 0, cv::INTER_AREA);
+    cv::rotate(b, wrong, cv::ROTATE_90_CLOCKWISE);
+    EXPECT_GT(cv::PSNR(a, b), 24.0) << name;
+    EXPECT_GT(cv::PSNR(a, b), cv::PSNR(a, wrong) + 10.0) << name << ": " << cv::PSNR(a, wrong);
+  }
+  const nlohmann::json upright_summary = ReadJson(SmallSession() / "model/publish.json");
+  EXPECT_EQ(upright_summary["catalog"]["cutouts_turned_upright"], 0);
 }
 
 TEST(ReportPageTest, TheSessionsReportShowsItsFiguresAndEveryImageItNames) {

@@ -184,19 +184,10 @@ TEST(ViewerPageTest, EscapesTheNameAndShipsItsScripts) {
   ::unsetenv("CAROUSEL_WEB_MODULES");
 }
 
-// A small simulated session, made once per CTest run: its lossless and web GLBs.
+// The small session publish_test and catalog_test share (one run per CTest run).
 std::filesystem::path SmallSession() {
-  return testing::SharedFixture("publish-small-session",
-                                [](const std::filesystem::path& out) {
-                                  const testing::ShellResult run = testing::RunShell(
-                                      (testing::BinDir() / "carousel").string() +
-                                      " run --sim --data " + testing::SharedDataDir().string() +
-                                      " --scene shoe --product tiny --out " + out.string() +
-                                      " --views 8 --size 648x432 --exclude-views 3");
-                                  if (run.code != 0)
-                                    throw IoError(out, "carousel run failed:\n" + run.out);
-                                }) /
-         "tiny";
+  return testing::SimulatedSession("publish-small-session", "tiny",
+                                   "--scene shoe --views 8 --size 648x432 --exclude-views 3");
 }
 
 TEST(GltfValidatorTest, TheSessionsGlbsHaveNoErrorsAndNoWarnings) {

@@ -141,6 +141,21 @@ ShellResult RunShell(const std::string& command) {
   return result;
 }
 
+std::filesystem::path SimulatedSession(const std::string& key, const std::string& product,
+                                       const std::string& arguments) {
+  return SharedFixture(key,
+                       [&](const std::filesystem::path& out) {
+                         const ShellResult run =
+                             RunShell(CarouselExecutable() + " run --sim --data '" +
+                                      SharedDataDir().string() + "' --product '" + product +
+                                      "' --out '" + out.string() + "' " + arguments);
+                         if (run.code != 0)
+                           throw std::runtime_error("carousel run failed in " + out.string() +
+                                                    ":\n" + run.out);
+                       }) /
+         product;
+}
+
 void WriteBytes(const std::filesystem::path& path, const std::string& bytes) {
   std::ofstream out(path, std::ios::binary);
   out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));

@@ -54,8 +54,9 @@ struct PublishSessionResult {
   std::size_t lossless_bytes = 0;
   std::vector<texture::HeldOutScore> held_out_lossless, held_out_web;
   double mean_psnr_lossless_db = 0.0, mean_psnr_web_db = 0.0;
-  int cutouts = 0;      // photos cut out
-  int spin_frames = 0;  // frames of the 360° set and the spin
+  int cutouts = 0;         // photos cut out
+  int cutouts_turned = 0;  // of them, turned by quarter turns to stand upright (rolled cameras)
+  int spin_frames = 0;     // frames of the 360° set and the spin
   bool spin_from_photos = false;
   int spin_camera = -1;             // the camera whose photos made it (from photos)
   double spin_elevation_deg = 0.0;  // of the rendered frames

@@ -61,6 +61,13 @@ struct ShellResult {
 // process, its output captured.
 ShellResult RunShell(const std::string& command);
 
+// A session of the simulated rig made once per CTest run by `carousel run --sim --data <shared
+// data> --product <product> --out <folder> <arguments>` (SharedFixture under `key`, so every test
+// asking with the same key gets the same folder): the session folder, read only.
+// \throw IoError with the command's output when the run fails.
+std::filesystem::path SimulatedSession(const std::string& key, const std::string& product,
+                                       const std::string& arguments);
+
 // Writes `bytes` to `path` (test fixtures: garbage, truncated copies).
 void WriteBytes(const std::filesystem::path& path, const std::string& bytes);
 std::string ReadBytes(const std::filesystem::path& path);
