@@ -27,7 +27,9 @@ constexpr CommandGroup kCommands[] = {
      "the processing stages (reconstruct, texture, publish) of one or more sessions, each "
      "skipped when its outputs are current",
      AddProcessCommand},
-    {"publish", "the web GLB (meshopt, JPEG), poster and viewer page of textured sessions",
+    {"publish",
+     "the web GLB, viewer page, catalog images and report page of textured sessions (publish "
+     "flags change what they name; the rest as the session last published)",
      AddPublishCommand},
     {"run", "the one-button session: capture, reconstruct, texture, export, publish",
      AddRunCommand},

@@ -20,6 +20,7 @@
 #include "carousel/app/terminal_progress.h"
 #include "carousel/core/error.h"
 #include "carousel/core/options.h"
+#include "carousel/core/options_json.h"
 #include "carousel/core/progress.h"
 
 namespace carousel::app {
@@ -88,6 +89,26 @@ void CreateParentFolder(const std::filesystem::path& file);
 
 // The help text of a described field: "faces of the optimized mesh (>= 100 faces)".
 std::string OptionHelp(const OptionInfo& info);
+
+// `base` (a session's recorded options, say) with the fields whose flags were given on
+// `command`'s command line taken from `given`, the object AddOptionFlags bound them to: what the
+// user typed changes only what it names.
+template <typename Owner>
+Owner WithGivenFlags(const CLI::App& command, const OptionTable<Owner>& table, const Owner& given,
+                     Owner base) {
+  nlohmann::json merged = OptionsToJson(table, base);
+  const nlohmann::json typed = OptionsToJson(table, given);
+  for (const OptionField<Owner>& field : table.fields()) {
+    const OptionInfo& info = field.info;
+    const std::string off = info.negative_name.empty() ? "no-" + info.name : info.negative_name;
+    for (const std::string& flag : {"--" + info.name, "--" + off}) {
+      const CLI::Option* option = command.get_option_no_throw(flag);
+      if (option != nullptr && option->count() > 0) merged[info.name] = typed[info.name];
+    }
+  }
+  OptionsFromJson(table, merged, &base, "the command line");
+  return base;
+}
 
 // --no-publish: the session stops after the texture stage (clears *publish_model).
 void AddNoPublishFlag(CLI::App* command, bool* publish_model);

@@ -3,6 +3,7 @@
 
 #include "carousel/studio/pipeline.h"
 #include "carousel/studio/reconstruct.h"
+#include "carousel/studio/run_session.h"
 #include "command.h"
 #include "print.h"
 
@@ -15,6 +16,7 @@ struct ReconstructArgs {
 };
 
 struct PublishArgs {
+  const CLI::App* command = nullptr;  // which publish flags were typed (WithGivenFlags)
   std::vector<std::filesystem::path> sessions;
   studio::PublishSessionOptions options;
   std::filesystem::path site;  // --out: the static catalog
@@ -22,9 +24,17 @@ struct PublishArgs {
 };
 
 struct ProcessArgs {
+  const CLI::App* command = nullptr;  // which publish flags were typed (WithGivenFlags)
   std::vector<std::filesystem::path> sessions;
   studio::ProcessOptions options;
 };
+
+// The texture flags of `carousel process`.
+const OptionTable<studio::TextureSessionOptions>& ProcessTextureFields() {
+  static const OptionTable<studio::TextureSessionOptions> table =
+      studio::TextureSessionOptions::Fields().Only({"exclude-views"});
+  return table;
+}
 
 // Every session in turn; a failing one is reported and the batch goes on. The exit code is
 // the first failure's (0 when every session is processed).
@@ -35,8 +45,16 @@ int RunProcess(const ProcessArgs& args, Io& io) {
     io.out << "session " << session.string() << "\n";
     try {
       CliProgress cli(io.err);
-      const studio::ProcessResult result =
-          studio::ProcessSession(session, args.options, cli.progress());
+      // What the session was processed with before, changed where a flag says so.
+      studio::ProcessOptions options = args.options;
+      studio::TextureSessionOptions recorded_texture = args.options.texture;
+      recorded_texture.grouping.exclude_views = studio::RecordedExcludedViews(session);
+      options.texture = WithGivenFlags(*args.command, ProcessTextureFields(), args.options.texture,
+                                       recorded_texture);
+      options.publish =
+          WithGivenFlags(*args.command, studio::PublishSessionOptions::Fields(),
+                         args.options.publish, studio::RecordedPublishOptions(session));
+      const studio::ProcessResult result = studio::ProcessSession(session, options, cli.progress());
       if (result.reconstruct) {
         PrintReconstruct(session, *result.reconstruct, io.out);
       } else {
@@ -85,12 +103,14 @@ void AddReconstructCommand(CLI::App& command, Dispatch& dispatch) {
 
 void AddProcessCommand(CLI::App& command, Dispatch& dispatch) {
   auto args = std::make_shared<ProcessArgs>();
+  args->command = &command;
   command.add_option("sessions", args->sessions, "session folders")->required();
   command.add_flag("--force", args->options.force, "run every stage, current or not");
   AddOptionFlags(&command, args->options.reconstruct,
                  studio::ReconstructOptions::Fields().Only({"faces"}));
-  AddOptionFlags(&command, args->options.texture,
-                 studio::TextureSessionOptions::Fields().Only({"exclude-views"}));
+  AddOptionFlags(&command, args->options.texture, ProcessTextureFields());
+  // Each texture or publish flag changes what it names; the rest is as the session was last
+  // processed (RecordedExcludedViews, RecordedPublishOptions).
   AddOptionFlags(&command, args->options.publish, studio::PublishSessionOptions::Fields());
   AddNoPublishFlag(&command, &args->options.publish_model);
   dispatch.On(&command, [args](Io& io) { return RunProcess(*args, io); });
@@ -98,6 +118,7 @@ void AddProcessCommand(CLI::App& command, Dispatch& dispatch) {
 
 void AddPublishCommand(CLI::App& command, Dispatch& dispatch) {
   auto args = std::make_shared<PublishArgs>();
+  args->command = &command;
   command.add_option("sessions", args->sessions, "session folders with a textured model")
       ->required();
   AddOptionFlags(&command, args->options, studio::PublishSessionOptions::Fields());
@@ -111,10 +132,13 @@ void AddPublishCommand(CLI::App& command, Dispatch& dispatch) {
     for (const std::filesystem::path& session : args->sessions) {
       try {
         CliProgress cli(io.err);
-        PrintPublish(session,
-                     studio::PublishSession(session, studio::ReadSession(session), args->options,
-                                            cli.progress()),
-                     io.out);
+        const studio::PublishSessionOptions options =
+            WithGivenFlags(*args->command, studio::PublishSessionOptions::Fields(), args->options,
+                           studio::RecordedPublishOptions(session));
+        PrintPublish(
+            session,
+            studio::PublishSession(session, studio::ReadSession(session), options, cli.progress()),
+            io.out);
         if (!args->site.empty()) {
           const studio::SiteResult site = studio::AddToSite(session, args->site, args->site_title);
           io.out << "site: " << site.product.folder.string() << " (" << site.product.files_written

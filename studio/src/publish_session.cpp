@@ -13,6 +13,7 @@
 #include "carousel/core/file_util.h"
 #include "carousel/core/image_io.h"
 #include "carousel/core/json.h"
+#include "carousel/core/options_json.h"
 #include "carousel/core/timer.h"
 #include "carousel/publish/renders.h"
 #include "carousel/publish/report_page.h"
@@ -520,6 +521,13 @@ PublishSessionResult PublishSession(const std::filesystem::path& session_folder,
     files.push_back("report.html");
     RemoveStale(model_folder, "report", files);
     links.emplace_back("Report", "report.html");
+  } else {
+    RemoveStale(model_folder, "report", files);
+  }
+  // What an earlier run made and this one was told not to (no spin, no report page) goes.
+  for (const char* name : {"360.zip", "spin.webp", "report.html"}) {
+    if (std::find(files.begin(), files.end(), name) != files.end()) continue;
+    std::filesystem::remove(model_folder / name, ec);
   }
   if (result.spin_frames > 0) {
     links.emplace_back("Spin", "spin.webp");
@@ -578,6 +586,10 @@ PublishSessionResult PublishSession(const std::filesystem::path& session_folder,
   for (const auto& [label, href] : links) page_links.push_back({label, href});
   summary["page"] = {{"glb", "model.web.glb"}, {"poster", "poster.jpg"}, {"links", page_links}};
   summary["seconds"] = part_seconds;
+  // What the next `carousel publish` or `process` of this session starts from (their flags
+  // change only what they name).
+  summary["options"] =
+      nlohmann::ordered_json::parse(OptionsToJson(PublishSessionOptions::Fields(), options).dump());
   summary["files"] = files;
   files.push_back("publish.json");
   WriteFileAtomic(model_folder / "publish.json", summary.dump(2) + "\n");

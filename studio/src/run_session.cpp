@@ -180,6 +180,48 @@ void RunOptions::Validate() const {
   if (!calibration_file.empty()) RequireReadableFile(calibration_file);
 }
 
+namespace {
+
+// The first of `records` (file, JSON pointer) that exists and holds the pointer: the file and the
+// value; nothing when none does. \throw FormatError naming a file that is not JSON.
+std::optional<std::pair<std::filesystem::path, json>> FirstRecord(
+    const std::vector<std::pair<std::filesystem::path, std::string>>& records) {
+  for (const auto& [file, pointer] : records) {
+    if (!std::filesystem::is_regular_file(file)) continue;
+    json j;
+    try {
+      std::ifstream in(file);
+      j = json::parse(in);
+    } catch (const json::exception& e) {
+      throw FormatError(file, std::string("malformed: ") + e.what());
+    }
+    const json::json_pointer at(pointer);
+    if (j.contains(at)) return std::pair{file, j.at(at)};
+  }
+  return std::nullopt;
+}
+
+}  // namespace
+
+PublishSessionOptions RecordedPublishOptions(const std::filesystem::path& session) {
+  PublishSessionOptions options;
+  if (const auto record = FirstRecord(
+          {{session / "model" / "publish.json", "/options"}, {session / kRunFile, "/publish"}}))
+    OptionsFromJson(PublishSessionOptions::Fields(), record->second, &options, record->first);
+  return options;
+}
+
+std::vector<int> RecordedExcludedViews(const std::filesystem::path& session) {
+  const auto record = FirstRecord({{session / "model" / "report.json", "/excluded_views"},
+                                   {session / kRunFile, "/texture/exclude_views"}});
+  if (!record) return {};
+  try {
+    return record->second.get<std::vector<int>>();
+  } catch (const json::exception& e) {
+    throw FormatError(record->first, std::string("excluded views: ") + e.what());
+  }
+}
+
 std::string SessionNameForProduct(const std::string& product) {
   std::string name;
   for (const char ch : product) {

@@ -25,6 +25,7 @@
 #include "carousel/publish/site.h"
 #include "carousel/testing/testing.h"
 #include "carousel/texture/textured_model.h"
+#include "small_session.h"
 
 namespace carousel::publish {
 namespace {
@@ -247,12 +248,6 @@ TEST(ReportPageTest, IslandsPaintAndTheHistogramAndPageSayWhatTheyShow) {
 
 // --- the publish stage's files of simulated sessions -----------------------------------------
 
-// The small session publish_test and catalog_test share (one run per CTest run).
-std::filesystem::path SmallSession() {
-  return testing::SimulatedSession("publish-small-session", "tiny",
-                                   "--scene shoe --views 8 --size 648x432 --exclude-views 3");
-}
-
 nlohmann::json ReadJson(const std::filesystem::path& path) {
   return nlohmann::json::parse(testing::ReadBytes(path));
 }
@@ -324,7 +319,7 @@ TEST(CatalogImagesTest, CutOutsAreThePhotosThroughTheirMasksOnWhite) {
         cv::imread((session / "model/cutouts" / (stem + ".jpg")).string(), cv::IMREAD_COLOR);
     ASSERT_FALSE(cut.empty()) << stem;
     EXPECT_EQ(cut.rows, cut.cols);
-    EXPECT_EQ(cut.cols, 1600);
+    EXPECT_EQ(cut.cols, kSmallCutoutSize);
     // White corners, the object centred with the margin along its longer side.
     for (const cv::Point p : {cv::Point(3, 3), cv::Point(cut.cols - 4, cut.rows - 4)})
       EXPECT_GE(cut.at<cv::Vec3b>(p)[1], 250) << stem;
@@ -340,9 +335,12 @@ TEST(CatalogImagesTest, CutOutsAreThePhotosThroughTheirMasksOnWhite) {
     const cv::Scalar photo_mean = cv::mean(photo, eroded);
     // Where the object lies in the cut-out: a black photo cut out through the same mask.
     cv::Mat inside;
-    cv::cvtColor(CutOut(cv::Mat(photo.size(), CV_8UC3, cv::Scalar::all(0)), mask, {.size = 1600}),
+    cv::cvtColor(CutOut(cv::Mat(photo.size(), CV_8UC3, cv::Scalar::all(0)), mask,
+                        {.size = kSmallCutoutSize}),
                  inside, cv::COLOR_BGR2GRAY);
-    cv::erode(inside < 10, inside, cv::getStructuringElement(cv::MORPH_ELLIPSE, {25, 25}));
+    // Away from the edge by about as much as the photo's mask was eroded (7 px of the photo).
+    const int k = 2 * std::max(3, 7 * kSmallCutoutSize / 648 / 2) + 1;
+    cv::erode(inside < 10, inside, cv::getStructuringElement(cv::MORPH_ELLIPSE, {k, k}));
     ASSERT_GT(cv::countNonZero(inside), 1000) << stem;
     const cv::Scalar cut_mean = cv::mean(cut, inside);
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(cut_mean[c], photo_mean[c], 4.0) << stem << " " << c;
@@ -460,6 +458,49 @@ TEST(CatalogImagesTest, PhotosOfASidewaysCameraGiveUprightCutouts) {
   }
   const nlohmann::json upright_summary = ReadJson(SmallSession() / "model/publish.json");
   EXPECT_EQ(upright_summary["catalog"]["cutouts_turned_upright"], 0);
+}
+
+// `carousel publish` goes on with the options the session last published with; a flag changes
+// only what it names.
+TEST(CatalogImagesTest, PublishingAgainKeepsTheSessionsOptionsAndAFlagChangesOnlyItsOwn) {
+  testing::TempDir dir;
+  const std::filesystem::path session = dir / "s";
+  std::filesystem::copy(SmallSession(), session, std::filesystem::copy_options::recursive);
+  const std::string publish = testing::CarouselExecutable() + " publish " + session.string();
+  const auto cutout_side = [&] {
+    const std::string stem =
+        std::filesystem::path(
+            ReadJson(session / "session.json")["views"][0]["image"].get<std::string>())
+            .stem()
+            .string();
+    return cv::imread((session / "model/cutouts" / (stem + ".jpg")).string()).cols;
+  };
+  const testing::ShellResult changed =
+      testing::RunShell(publish + " --cutout-size 320 --spin-frames 0");
+  ASSERT_EQ(changed.code, 0) << changed.out;
+  nlohmann::json options = ReadJson(session / "model/publish.json")["options"];
+  EXPECT_EQ(options["cutout-size"], 320);
+  EXPECT_EQ(options["spin-frames"], 0);
+  EXPECT_EQ(options["hero-size"], 640);  // as the session was made
+  EXPECT_EQ(cutout_side(), 320);
+  EXPECT_FALSE(std::filesystem::exists(session / "model/360.zip"));  // the earlier one goes
+  EXPECT_FALSE(std::filesystem::exists(session / "model/spin.webp"));
+  const testing::ShellResult again = testing::RunShell(publish + " --hero-size 500");
+  ASSERT_EQ(again.code, 0) << again.out;
+  options = ReadJson(session / "model/publish.json")["options"];
+  EXPECT_EQ(options["cutout-size"], 320);
+  EXPECT_EQ(options["spin-frames"], 0);
+  EXPECT_EQ(options["hero-size"], 500);
+  EXPECT_EQ(cutout_side(), 320);
+  EXPECT_EQ(cv::imread((session / "model/hero.jpg").string()).cols, 500);
+  // A malformed record is named.
+  nlohmann::json summary = ReadJson(session / "model/publish.json");
+  summary["options"]["cutout-size"] = "big";
+  testing::WriteBytes(session / "model/publish.json", summary.dump());
+  const testing::ShellResult bad = testing::RunShell(publish);
+  EXPECT_NE(bad.code, 0);
+  EXPECT_THAT(bad.out, HasSubstr("publish.json"));
+  EXPECT_THAT(bad.out, HasSubstr("cutout-size"));
 }
 
 TEST(ReportPageTest, TheSessionsReportShowsItsFiguresAndEveryImageItNames) {

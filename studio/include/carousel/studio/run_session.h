@@ -15,6 +15,7 @@
 #include <functional>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "carousel/core/progress.h"
 #include "carousel/studio/calibrate_session.h"
@@ -76,5 +77,14 @@ RunResult RunSession(const RunOptions& options, Progress& progress);
 // Continues a session started by RunSession. \throw IoError/FormatError naming run.json or
 // session.json, and what the stages throw.
 RunResult ResumeSession(const std::filesystem::path& session, Progress& progress);
+
+// The publish options a session goes on with: those it last published with
+// (model/publish.json's "options"), else those its `carousel run` was given (run.json), else the
+// defaults. \throw FormatError naming the file whose record is malformed.
+PublishSessionOptions RecordedPublishOptions(const std::filesystem::path& session);
+// The views a session's texture held out: those its last texture held out
+// (model/report.json's "excluded_views"), else those its `carousel run` was given (run.json),
+// else none. \throw FormatError naming the file whose record is malformed.
+std::vector<int> RecordedExcludedViews(const std::filesystem::path& session);
 
 }  // namespace carousel::studio
