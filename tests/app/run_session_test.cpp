@@ -84,8 +84,13 @@ int Wait(pid_t pid) {
   return WIFEXITED(status) ? WEXITSTATUS(status) : -WTERMSIG(status);
 }
 
+// The publish stage's images at sizes that suit these small photos (its defaults are for
+// DSLR photos: a 720 px spin of 24 renders alone takes 5 s under the sanitizers).
+const std::vector<std::string> kSmallPublish = {"--spin-size",   "240", "--hero-size",   "480",
+                                                "--poster-size", "240", "--cutout-size", "480"};
+
 // 8 stops at 480x320 with view 2 held out and scored; or, for the kill test (11 runs, 6 under
-// the sanitizers), 6 stops at 360x240 and nothing held out.
+// the sanitizers), 6 stops at 360x240 and nothing held out. Both publish at kSmallPublish.
 std::vector<std::string> RunArgs(const std::filesystem::path& out, bool small = false) {
   std::vector<std::string> args = {
       "run",   "--sim",      "--product", "kill-test",
@@ -94,6 +99,7 @@ std::vector<std::string> RunArgs(const std::filesystem::path& out, bool small = 
       small ? std::vector<std::string>{"--size", "360x240", "--views", "6"}
             : std::vector<std::string>{"--size", "480x320", "--views", "8", "--exclude-views", "2"};
   args.insert(args.end(), size.begin(), size.end());
+  args.insert(args.end(), kSmallPublish.begin(), kSmallPublish.end());
   return args;
 }
 
@@ -200,6 +206,10 @@ TEST(RunSessionTest, ResumesAfterSigkillAtTenMomentsWithTheSamePhotosAndNoDuplic
     for (const char* name :
          {"model/model.obj", "model/model.png", "model/model.glb", "recon/mesh.ply"})
       EXPECT_TRUE(std::filesystem::exists(session / name)) << "kill " << k << ": " << name;
+    // The resumed run published with the flags the killed one was given (run.json).
+    const nlohmann::json published =
+        nlohmann::json::parse(testing::ReadBytes(session / "model/publish.json"));
+    EXPECT_EQ(published["catalog"]["spin_renders"]["size"], 240) << "kill " << k;
     std::printf("kill %d: during %s, %zu photos recorded\n", k, phase.c_str(), before.size());
     // Nothing but the session (and hidden staging left by a kill) in the output folder.
     for (const auto& entry : std::filesystem::directory_iterator(out)) {
@@ -217,7 +227,9 @@ TEST(RunSessionTest, ResumesAfterSigkillAtTenMomentsWithTheSamePhotosAndNoDuplic
 // a batch goes on past a session that fails and reports it.
 TEST(RunSessionTest, ProcessSkipsCurrentStagesAndRunsABatchPastAFailure) {
   TempDir dir;
-  ASSERT_EQ(Wait(Spawn(RunArgs(dir.path(), true))), 0);
+  std::vector<std::string> run_args = RunArgs(dir.path(), true);
+  run_args.insert(run_args.end(), {"--exclude-views", "2"});
+  ASSERT_EQ(Wait(Spawn(run_args)), 0);
   const auto session = dir.path() / "kill-test";
   const auto run = [](const std::vector<std::string>& args, std::string* out_text) {
     std::vector<std::string> all = {"carousel", "--log-level", "off", "process"};
@@ -230,11 +242,13 @@ TEST(RunSessionTest, ProcessSkipsCurrentStagesAndRunsABatchPastAFailure) {
     return code;
   };
   std::string text;
-  // The one-button run recorded its stages' inputs: nothing to do.
+  // The one-button run recorded its stages' inputs, and the held-out view and publish flags it
+  // was given (report.json, publish.json), which `process` goes on with: nothing to do.
   const auto mesh_time = std::filesystem::last_write_time(session / "recon" / "mesh.ply");
   EXPECT_EQ(run({session.string()}, &text), 0) << text;
   EXPECT_THAT(text, ::testing::HasSubstr("reconstruct: current, skipped"));
   EXPECT_THAT(text, ::testing::HasSubstr("texture: current, skipped"));
+  EXPECT_THAT(text, ::testing::HasSubstr("publish: current, skipped"));
   EXPECT_EQ(std::filesystem::last_write_time(session / "recon" / "mesh.ply"), mesh_time);
   // Another face count: both stages again.
   EXPECT_EQ(run({"--faces", "2000", session.string()}, &text), 0) << text;
@@ -242,6 +256,10 @@ TEST(RunSessionTest, ProcessSkipsCurrentStagesAndRunsABatchPastAFailure) {
   EXPECT_THAT(text, ::testing::Not(::testing::HasSubstr("skipped")));
   EXPECT_NEAR(static_cast<double>(ReadMesh(session / "recon" / "mesh.ply").n_faces()), 2000.0,
               20.0);
+  // ... still holding out the view the run held out.
+  EXPECT_EQ(
+      nlohmann::json::parse(testing::ReadBytes(session / "model/report.json")).at("excluded_views"),
+      nlohmann::json::array({2}));
   // The texture alone goes stale when its model files go.
   std::filesystem::remove(session / "model" / "model.glb");
   EXPECT_EQ(run({"--faces", "2000", session.string()}, &text), 0) << text;

@@ -19,6 +19,7 @@
 #include "carousel/publish/web_glb.h"
 #include "carousel/testing/testing.h"
 #include "carousel/texture/held_out.h"
+#include "small_session.h"
 
 namespace carousel::publish {
 namespace {
@@ -182,12 +183,6 @@ TEST(ViewerPageTest, EscapesTheNameAndShipsItsScripts) {
     EXPECT_THAT(e.what(), HasSubstr("install-deps"));
   }
   ::unsetenv("CAROUSEL_WEB_MODULES");
-}
-
-// The small session publish_test and catalog_test share (one run per CTest run).
-std::filesystem::path SmallSession() {
-  return testing::SimulatedSession("publish-small-session", "tiny",
-                                   "--scene shoe --views 8 --size 648x432 --exclude-views 3");
 }
 
 TEST(GltfValidatorTest, TheSessionsGlbsHaveNoErrorsAndNoWarnings) {
