@@ -13,8 +13,9 @@ namespace carousel::publish {
 inline constexpr int kSmallCutoutSize = 640;
 // The publish flags the session was made with (pass them to a `carousel publish` of a copy to
 // get the same files).
-inline const std::string kSmallPublishFlags = "--cutout-size 640 --spin-size 320 --hero-size 640 "
-                                              "--poster-size 320";
+inline const std::string kSmallPublishFlags =
+    "--cutout-size 640 --spin-size 320 --hero-size 640 "
+    "--poster-size 320";
 
 inline std::filesystem::path SmallSession() {
   return testing::SimulatedSession(
