@@ -138,12 +138,10 @@ bool ZIsUp(const Session& session) {
   return session.frame == "turntable" || session.world_from_dataset.has_value();
 }
 
-// The elevation of the session's first camera above the model's centre, degrees; 15 when the
-// session's frame has no up (ZIsUp).
-double CameraElevationDeg(const Session& session, const texture::TexturedModel& model) {
+// The elevation of the session's first camera above the centre of the model's `box`, degrees; 15
+// when the session's frame has no up (ZIsUp).
+double CameraElevationDeg(const Session& session, const Eigen::AlignedBox3d& box) {
   if (!ZIsUp(session) || session.views.empty()) return 15.0;
-  Eigen::AlignedBox3d box;
-  for (const Eigen::Vector3d& p : model.positions) box.extend(p);
   const int camera = session.views.front().camera;
   double sum = 0.0;
   int n = 0;
@@ -417,7 +415,7 @@ PublishSessionResult PublishSession(const std::filesystem::path& session_folder,
     publish::OrbitShot shot;
     shot.width = shot.height = options.spin_size;
     shot.framing = publish::OrbitShot::Framing::kCylinder;
-    shot.elevation_deg = result.spin_elevation_deg = CameraElevationDeg(session, model);
+    shot.elevation_deg = result.spin_elevation_deg = CameraElevationDeg(session, model_box);
     cut.size = options.spin_size;
     for (int k = 0; k < options.spin_frames; ++k) {
       if (result.spin_from_photos) {

@@ -7,6 +7,7 @@
 
 #include "carousel/core/error.h"
 #include "carousel/core/file_util.h"
+#include "carousel/core/json.h"
 #include "carousel/core/logging.h"
 #include "carousel/core/options_json.h"
 #include "carousel/core/timer.h"
@@ -183,18 +184,13 @@ void RunOptions::Validate() const {
 namespace {
 
 // The first of `records` (file, JSON pointer) that exists and holds the pointer: the file and the
-// value; nothing when none does. \throw FormatError naming a file that is not JSON.
+// value; nothing when none does. \throw FormatError naming a file that is not JSON (IoError:
+// unreadable).
 std::optional<std::pair<std::filesystem::path, json>> FirstRecord(
     const std::vector<std::pair<std::filesystem::path, std::string>>& records) {
   for (const auto& [file, pointer] : records) {
     if (!std::filesystem::is_regular_file(file)) continue;
-    json j;
-    try {
-      std::ifstream in(file);
-      j = json::parse(in);
-    } catch (const json::exception& e) {
-      throw FormatError(file, std::string("malformed: ") + e.what());
-    }
+    const json j = ParseJsonFile(file);
     const json::json_pointer at(pointer);
     if (j.contains(at)) return std::pair{file, j.at(at)};
   }
