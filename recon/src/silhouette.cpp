@@ -4,8 +4,10 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <functional>
 #include <numbers>
 #include <optional>
+#include <sstream>
 
 #include <Eigen/Dense>
 #include <opencv2/imgproc.hpp>
@@ -13,12 +15,31 @@
 #include "carousel/core/error.h"
 #include "carousel/core/logging.h"
 #include "carousel/core/parallel.h"
+#include "carousel/recon/visual_hull.h"
 
 namespace carousel::recon {
 namespace {
 
 // Longest side of the thumbnail the backdrop and plate models are fitted on, pixels.
 constexpr int kFitSize = 320;
+// Longest side of the region the graph cut segments, working pixels, and its iterations.
+constexpr int kGraphCutSize = 480;
+constexpr int kGraphCutIterations = 3;
+// Multi-view consistency: with this many views or more; a view is re-decided when it has
+// more than this many hole pixels well inside the others' hull, or as many (and this fraction
+// of its silhouette) outside it.
+constexpr std::size_t kMinConsistencyViews = 4;
+constexpr double kMinDisagreementPx = 25.0;
+constexpr double kMinDisagreementFraction = 0.002;
+// A segmentation that keeps less than this fraction of the largest candidate piece means the
+// border band showed the object's colours.
+constexpr double kMinKeptOfCandidates = 0.1;
+// The plate counts when this fraction of its inner edge is seen against the backdrop.
+constexpr double kMinVisiblePlateEdge = 0.1;
+// A silhouette covers at least this fraction of the photo.
+constexpr double kMinObjectFraction = 1e-4;
+// 8-bit level from which a pixel counts as clipped white.
+constexpr int kClippedLevel = 250;
 
 // A smooth colour model c(x, y) = sum_k coeff_k * basis_k(x, y), per channel, with x and y
 // normalised to [-1, 1] over the image.
@@ -198,6 +219,46 @@ class Classifier {
   const SilhouetteOptions& options_;
 };
 
+// The fraction of the plate's inner edge (just inside the rim band) that shows the plate's
+// model with the backdrop's model just outside it: the plate seen against the backdrop.
+double VisiblePlateEdge(const cv::Mat& image, const cv::Mat& plate, const cv::Mat& rim,
+                        const ColourModel& backdrop, const ColourModel& plate_colour,
+                        const Classifier& classifier) {
+  const cv::Mat ring_kernel = cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(7, 7));
+  cv::Mat near_rim;
+  cv::dilate(rim, near_rim, ring_kernel);
+  const cv::Mat inner = near_rim & plate & ~rim;
+  const cv::Mat outer = near_rim & ~plate & ~rim;
+  cv::Mat inner_ok = cv::Mat::zeros(image.size(), CV_8UC1);
+  cv::Mat outer_ok = cv::Mat::zeros(image.size(), CV_8UC1);
+  const cv::Rect box = cv::boundingRect(near_rim);
+  for (int y = box.y; y < box.br().y; ++y) {
+    const auto* in = image.ptr<cv::Vec3b>(y);
+    const auto* i_row = inner.ptr<std::uint8_t>(y);
+    const auto* o_row = outer.ptr<std::uint8_t>(y);
+    const double ny = (y + 0.5) / image.rows * 2.0 - 1.0;
+    for (int x = box.x; x < box.br().x; ++x) {
+      if (!i_row[x] && !o_row[x]) continue;
+      const double nx = (x + 0.5) / image.cols * 2.0 - 1.0;
+      const cv::Vec3f c(in[x][0], in[x][1], in[x][2]);
+      if (i_row[x] && classifier.IsBackground(c, plate_colour.At(nx, ny)))
+        inner_ok.at<std::uint8_t>(y, x) = 255;
+      if (o_row[x] && classifier.IsBackground(c, backdrop.At(nx, ny)))
+        outer_ok.at<std::uint8_t>(y, x) = 255;
+    }
+  }
+  const double inner_total = cv::countNonZero(inner);
+  if (inner_total == 0) return 0.0;
+  // Across the rim band: its width is its area over the outline's length (the inner ring is
+  // 3 pixels wide).
+  const double band_width = cv::countNonZero(rim & near_rim) / (inner_total / 3.0);
+  const int reach = static_cast<int>(std::ceil(band_width)) + 4;
+  cv::Mat outer_near;
+  cv::dilate(outer_ok, outer_near,
+             cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * reach + 1, 2 * reach + 1)));
+  return cv::countNonZero(inner_ok & outer_near) / inner_total;
+}
+
 void RemoveSmallComponents(cv::Mat* fg, double min_fraction, int* kept) {
   cv::Mat labels, stats, centroids;
   const int n = cv::connectedComponentsWithStats(*fg, labels, stats, centroids, 8, CV_32S);
@@ -238,6 +299,322 @@ void FillSmallHoles(cv::Mat* fg, double max_area) {
     std::uint8_t* m = fg->ptr<std::uint8_t>(y);
     for (int x = 0; x < fg->cols; ++x) m[x] = static_cast<std::uint8_t>(m[x] | fill[l[x]]);
   }
+}
+
+// The frame's border band, pixels: a silhouette never reaches into it (a view whose object
+// does is rejected by CheckClearOfBorder), so all of it is backdrop, cloth or stand.
+int BorderBand(cv::Size size) { return std::max(3, std::min(size.width, size.height) / 100); }
+
+// The expected background colour at a full-resolution pixel.
+using ExpectedBackground = std::function<cv::Vec3f(int x, int y)>;
+
+// The colour residuals (photo minus expected background) of the frame's border band, as
+// clusters: how the backdrop departs from its smooth model (cloth folds, a stand, a dark
+// cloth's sheen) where it is surely backdrop. A residual is compared where it occurs, so a
+// white part before a darker patch of a white backdrop stays apart from the backdrop's
+// brighter top. `usable` (same size, CV_8UC1) marks the pixels that may be sampled.
+class BorderResiduals {
+ public:
+  BorderResiduals(const cv::Mat& image, const ExpectedBackground& expected, const cv::Mat& usable,
+                  int band) {
+    cv::Mat samples(0, 3, CV_32F);
+    const int step = std::max(
+        1, static_cast<int>(std::sqrt(2.0 * band * (image.cols + image.rows) / kMaxSamples)));
+    for (int y = 0; y < image.rows; y += step) {
+      for (int x = 0; x < image.cols; x += step) {
+        const bool in_band =
+            x < band || y < band || x >= image.cols - band || y >= image.rows - band;
+        if (!in_band || !usable.at<std::uint8_t>(y, x)) continue;
+        const auto& c = image.at<cv::Vec3b>(y, x);
+        const cv::Vec3f b = expected(x, y);
+        const float row[3] = {c[0] - b[0], c[1] - b[1], c[2] - b[2]};
+        samples.push_back(cv::Mat(1, 3, CV_32F, const_cast<float*>(row)));
+      }
+    }
+    if (samples.rows < 4 * kClusters) return;
+    cv::Mat labels, centres;
+    cv::setRNGSeed(1);  // deterministic clusters
+    cv::kmeans(samples, kClusters, labels,
+               cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 12, 0.5), 1,
+               cv::KMEANS_PP_CENTERS, centres);
+    std::vector<double> sum_sq(kClusters, 0.0);
+    std::vector<int> count(kClusters, 0);
+    for (int i = 0; i < samples.rows; ++i) {
+      const int k = labels.at<int>(i);
+      sum_sq[k] += cv::norm(samples.row(i), centres.row(k), cv::NORM_L2SQR);
+      ++count[k];
+    }
+    for (int k = 0; k < kClusters; ++k) {
+      if (count[k] < 3) continue;
+      const cv::Vec3f centre(centres.at<float>(k, 0), centres.at<float>(k, 1),
+                             centres.at<float>(k, 2));
+      clusters_.push_back({centre, std::sqrt(sum_sq[k] / count[k])});
+    }
+  }
+  // Whether residual c is one of the border's: within 3 standard deviations (at least
+  // `floor_levels`) of a cluster.
+  bool Contains(const cv::Vec3f& c, double floor_levels) const {
+    for (const auto& cluster : clusters_) {
+      const double reach = std::max(floor_levels, 3.0 * cluster.spread);
+      const cv::Vec3f d = c - cluster.centre;
+      if (d.dot(d) <= reach * reach) return true;
+    }
+    return false;
+  }
+
+ private:
+  static constexpr int kClusters = 6;
+  static constexpr double kMaxSamples = 6000.0;
+  struct Cluster {
+    cv::Vec3f centre;
+    double spread;
+  };
+  std::vector<Cluster> clusters_;
+};
+
+// Segmentation by graph cut (OpenCV's GrabCut: colour mixtures for object and background,
+// min-cut with a contrast-sensitive smoothness term), at a working resolution, on the region
+// around the candidates. `candidates` (CV_8UC1, 255 = not the expected backdrop) seeds it: a
+// candidate whose colour is also one of the border band's is probably background (cloth, a
+// stand), the others probably object; the border band is background. Returns the full-size
+// binary mask (255 = object).
+cv::Mat SegmentByGraphCut(const cv::Mat& image, const cv::Mat& candidates,
+                          const ExpectedBackground& expected, const SilhouetteOptions& options,
+                          const cv::Mat& prior, const std::string& name) {
+  const cv::Size full = image.size();
+  // The region: the candidates' pieces that matter (and what the other views say is object),
+  // with a margin.
+  cv::Mat pieces = candidates.clone();
+  int unused = 0;
+  RemoveSmallComponents(&pieces, 0.01, &unused);
+  if (!prior.empty()) pieces |= prior == 255;
+  if (cv::countNonZero(pieces) == 0) return cv::Mat::zeros(full, CV_8UC1);
+  cv::Rect roi = cv::boundingRect(pieces);
+  const int margin = std::max(8, std::max(roi.width, roi.height) / 10);
+  roi = cv::Rect(roi.x - margin, roi.y - margin, roi.width + 2 * margin, roi.height + 2 * margin) &
+        cv::Rect(cv::Point(0, 0), full);
+  const double scale =
+      std::min(1.0, static_cast<double>(kGraphCutSize) / std::max(roi.width, roi.height));
+  const int band_full = BorderBand(full);
+  // Border colours, sampled at full resolution (every band pixel when the object must stay
+  // clear of the border; otherwise only where the smooth backdrop model holds).
+  const cv::Mat usable =
+      options.check_border ? cv::Mat(full, CV_8UC1, cv::Scalar(255)) : cv::Mat(~candidates);
+  const BorderResiduals border(image, expected, usable, band_full);
+
+  cv::Mat small, small_candidates;
+  if (scale < 1.0) {
+    cv::resize(image(roi), small, cv::Size(), scale, scale, cv::INTER_AREA);
+    cv::resize(candidates(roi), small_candidates, small.size(), 0, 0, cv::INTER_AREA);
+  } else {
+    small = image(roi).clone();
+    small_candidates = candidates(roi).clone();
+  }
+  const double floor = std::max(12.0, 2.0 * options.noise_threshold);
+  const double noise_sq = options.noise_threshold * options.noise_threshold;
+  cv::Mat labels(small.size(), CV_8UC1);
+  int object_seeds = 0;
+  for (int y = 0; y < small.rows; ++y) {
+    const auto* in = small.ptr<cv::Vec3b>(y);
+    const auto* cand = small_candidates.ptr<std::uint8_t>(y);
+    auto* out = labels.ptr<std::uint8_t>(y);
+    const int full_y = std::min(full.height - 1, roi.y + static_cast<int>((y + 0.5) / scale));
+    for (int x = 0; x < small.cols; ++x) {
+      const int full_x = std::min(full.width - 1, roi.x + static_cast<int>((x + 0.5) / scale));
+      const cv::Vec3f c = cv::Vec3f(in[x][0], in[x][1], in[x][2]) - expected(full_x, full_y);
+      if (cand[x] < 128) {
+        // The backdrop itself, within the sensor's noise, is surely background: a
+        // see-through hole (a handle's, a tab's loop) stays open against the smoothness term.
+        out[x] = c.dot(c) <= noise_sq ? cv::GC_BGD : cv::GC_PR_BGD;
+        continue;
+      }
+      const bool object = !border.Contains(c, floor);
+      out[x] = object ? cv::GC_PR_FGD : cv::GC_PR_BGD;
+      object_seeds += object ? 1 : 0;
+    }
+  }
+  {
+    // Surely background where a whole neighbourhood is: a dark object's shadowed crease on a
+    // dark backdrop is not.
+    cv::Mat sure = labels == cv::GC_BGD;
+    cv::erode(sure, sure, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3)));
+    labels.setTo(cv::GC_PR_BGD, (labels == cv::GC_BGD) & ~sure);
+  }
+  {
+    // The seeds' interior (specks and thin cloth folds eroded away) is surely object: colour
+    // models of the whole region would otherwise take a white part before a white backdrop's
+    // darker patch for backdrop.
+    cv::Mat sure = labels == cv::GC_PR_FGD;
+    cv::erode(sure, sure, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(5, 5)));
+    labels.setTo(cv::GC_FGD, sure);
+  }
+  if (!prior.empty()) {
+    // The other views' hull: nothing outside it is object; well inside it, a backdrop colour
+    // is probably the object's own (an eye's white before a white backdrop), since a
+    // see-through hole would be seen by the neighbouring views too and carved from it.
+    cv::Mat small_prior;
+    cv::resize(prior(roi), small_prior, small.size(), 0, 0, cv::INTER_NEAREST);
+    labels.setTo(cv::GC_PR_FGD,
+                 (small_prior == 255) & ((labels == cv::GC_PR_BGD) | (labels == cv::GC_BGD)));
+    labels.setTo(cv::GC_BGD, small_prior == 0);
+  }
+  if (options.check_border) {
+    // The band, in working pixels (where the region reaches it).
+    const double band = band_full * scale;
+    const int left = roi.x < band_full ? static_cast<int>(std::ceil(band - roi.x * scale)) : 0;
+    const int top = roi.y < band_full ? static_cast<int>(std::ceil(band - roi.y * scale)) : 0;
+    const int right_gap = full.width - roi.br().x;
+    const int bottom_gap = full.height - roi.br().y;
+    const int right =
+        right_gap < band_full ? static_cast<int>(std::ceil(band - right_gap * scale)) : 0;
+    const int bottom =
+        bottom_gap < band_full ? static_cast<int>(std::ceil(band - bottom_gap * scale)) : 0;
+    if (left > 0) labels.colRange(0, std::min(left, labels.cols)).setTo(cv::GC_BGD);
+    if (top > 0) labels.rowRange(0, std::min(top, labels.rows)).setTo(cv::GC_BGD);
+    if (right > 0) labels.colRange(std::max(0, labels.cols - right), labels.cols).setTo(cv::GC_BGD);
+    if (bottom > 0)
+      labels.rowRange(std::max(0, labels.rows - bottom), labels.rows).setTo(cv::GC_BGD);
+  }
+  // The region's own edge is background where it is not the frame's.
+  if (roi.x > 0) labels.col(0).setTo(cv::GC_BGD);
+  if (roi.y > 0) labels.row(0).setTo(cv::GC_BGD);
+  if (roi.br().x < full.width) labels.col(labels.cols - 1).setTo(cv::GC_BGD);
+  if (roi.br().y < full.height) labels.row(labels.rows - 1).setTo(cv::GC_BGD);
+  if (object_seeds == 0 && cv::countNonZero(labels & 1) == 0) return cv::Mat::zeros(full, CV_8UC1);
+  cv::Mat background_model, object_model;
+  try {
+    cv::grabCut(small, labels, cv::Rect(), background_model, object_model, kGraphCutIterations,
+                cv::GC_INIT_WITH_MASK);
+  } catch (const cv::Exception& e) {
+    throw FormatError(name, std::string("silhouette segmentation failed: ") + e.what());
+  }
+  cv::Mat object = (labels == cv::GC_FGD) | (labels == cv::GC_PR_FGD);
+  cv::Mat result = cv::Mat::zeros(full, CV_8UC1);
+  if (scale < 1.0) {
+    cv::Mat up;
+    cv::resize(object, up, roi.size(), 0, 0, cv::INTER_LINEAR);
+    result(roi).setTo(255, up >= 128);
+  } else {
+    object.copyTo(result(roi));
+  }
+  return result;
+}
+
+// A silhouette that reaches the frame's border band is cut by the frame: the hull would lose
+// what lies outside. \throw FormatError naming the photo.
+void CheckClearOfBorder(const cv::Mat& fg, const std::string& name) {
+  const int band = BorderBand(fg.size());
+  const int inner_w = fg.cols - 2 * band;
+  const int inner_h = fg.rows - 2 * band;
+  if (inner_w <= 2 || inner_h <= 2) return;
+  // The first ring of pixels inside the band.
+  const cv::Rect inner(band, band, inner_w, inner_h);
+  const cv::Mat ring = fg(inner);
+  const int perimeter = 2 * (inner_w + inner_h);
+  const int touching = cv::countNonZero(ring.row(0)) + cv::countNonZero(ring.row(inner_h - 1)) +
+                       cv::countNonZero(ring.col(0)) + cv::countNonZero(ring.col(inner_w - 1));
+  if (touching > std::max(3, perimeter / 200)) {
+    std::ostringstream reason;
+    reason << "the object touches the image border (" << touching
+           << " pixels of its outline lie within " << band
+           << " pixels of the frame's edge); its silhouette would be cut, so frame it with a "
+              "margin (zoom out or move the camera back)";
+    throw FormatError(name, reason.str());
+  }
+}
+
+// A photo whose object is mostly clipped white has lost its outline against a light backdrop.
+// \throw FormatError naming the photo.
+void CheckExposure(const cv::Mat& image, const cv::Mat& fg, const std::string& name) {
+  cv::Mat clipped;
+  cv::inRange(image, cv::Scalar::all(kClippedLevel), cv::Scalar::all(255), clipped);
+  const double clipped_image = cv::countNonZero(clipped) / static_cast<double>(image.total());
+  const double object = cv::countNonZero(fg);
+  const double clipped_object = object > 0 ? cv::countNonZero(clipped & fg) / object : 0.0;
+  if (clipped_image > 0.4 || clipped_object > 0.6) {
+    std::ostringstream reason;
+    reason << "over-exposed: " << cvRound(100.0 * clipped_image) << "% of the photo and "
+           << cvRound(100.0 * clipped_object)
+           << "% of the object are clipped at white; lower the exposure";
+    throw FormatError(name, reason.str());
+  }
+}
+
+// For each pixel, the colour (of `smooth`, CV_32FC3) at the nearest pixel marked in `sure`
+// (CV_8UC1, 255): the local colour of one side of an outline, taken where that side is surely
+// itself and nearest the pixel, so shading across the object does not bias it.
+cv::Mat NearestColour(const cv::Mat& smooth, const cv::Mat& sure) {
+  cv::Mat distance, labels;
+  cv::distanceTransform(~sure, distance, labels, cv::DIST_L2, cv::DIST_MASK_5,
+                        cv::DIST_LABEL_PIXEL);
+  // Labels number the marked pixels in scan order.
+  std::vector<cv::Vec3f> colour_of_label(1);
+  for (int y = 0; y < sure.rows; ++y) {
+    const auto* m = sure.ptr<std::uint8_t>(y);
+    const auto* c = smooth.ptr<cv::Vec3f>(y);
+    const auto* l = labels.ptr<int>(y);
+    for (int x = 0; x < sure.cols; ++x) {
+      if (!m[x]) continue;
+      if (static_cast<std::size_t>(l[x]) >= colour_of_label.size())
+        colour_of_label.resize(static_cast<std::size_t>(l[x]) + 1);
+      colour_of_label[static_cast<std::size_t>(l[x])] = c[x];
+    }
+  }
+  cv::Mat nearest(sure.size(), CV_32FC3);
+  for (int y = 0; y < sure.rows; ++y) {
+    const auto* l = labels.ptr<int>(y);
+    auto* out = nearest.ptr<cv::Vec3f>(y);
+    for (int x = 0; x < sure.cols; ++x) {
+      const auto k = static_cast<std::size_t>(l[x]);
+      out[x] = k < colour_of_label.size() ? colour_of_label[k] : cv::Vec3f();
+    }
+  }
+  return nearest;
+}
+
+// Boundary refinement to an alpha matte: in a band around the outline, each pixel's coverage
+// alpha = <I - B, F - B> / |F - B|^2 with F and B the object's and the background's colours
+// nearest to it where each is sure (just beyond the band), 8-bit; elsewhere 0 or 255.
+void RefineToAlpha(const cv::Mat& image, const SilhouetteOptions& options, cv::Mat* fg) {
+  // The band covers the graph cut's working-resolution step.
+  const int band =
+      1 +
+      static_cast<int>(std::ceil(std::max(image.cols, image.rows) / (kGraphCutSize * 1.0) * 0.5));
+  cv::Rect roi = cv::boundingRect(*fg);
+  const int pad = 2 * band + 2;
+  roi = cv::Rect(roi.x - pad, roi.y - pad, roi.width + 2 * pad, roi.height + 2 * pad) &
+        cv::Rect(0, 0, image.cols, image.rows);
+  const cv::Mat fg_roi = (*fg)(roi);
+  const cv::Mat kernel =
+      cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * band + 1, 2 * band + 1));
+  cv::Mat grown, shrunk;
+  cv::dilate(fg_roi, grown, kernel);
+  cv::erode(fg_roi, shrunk, kernel);
+  if (cv::countNonZero(shrunk) == 0) return;
+  cv::Mat colour, smooth;
+  image(roi).convertTo(colour, CV_32FC3);
+  cv::blur(colour, smooth, cv::Size(3, 3));
+  const cv::Mat object = NearestColour(smooth, shrunk);
+  const cv::Mat background = NearestColour(smooth, ~grown);
+  cv::Mat refined = fg_roi.clone();
+  const double min_contrast = 2.0 * std::max(options.noise_threshold, 4.0);
+  for (int y = 0; y < roi.height; ++y) {
+    const auto* g = grown.ptr<std::uint8_t>(y);
+    const auto* s = shrunk.ptr<std::uint8_t>(y);
+    const auto* f_row = object.ptr<cv::Vec3f>(y);
+    const auto* b_row = background.ptr<cv::Vec3f>(y);
+    const auto* i_row = colour.ptr<cv::Vec3f>(y);
+    auto* out = refined.ptr<std::uint8_t>(y);
+    for (int x = 0; x < roi.width; ++x) {
+      if (!g[x] || s[x]) continue;
+      const cv::Vec3f fb = f_row[x] - b_row[x];
+      const double contrast_sq = fb.dot(fb);
+      if (contrast_sq < min_contrast * min_contrast) continue;
+      const double alpha = (i_row[x] - b_row[x]).dot(fb) / contrast_sq;
+      out[x] = cv::saturate_cast<std::uint8_t>(255.0 * std::clamp(alpha, 0.0, 1.0));
+    }
+  }
+  refined.copyTo((*fg)(roi));
 }
 
 }  // namespace
@@ -302,7 +679,15 @@ const OptionTable<SilhouetteOptions>& SilhouetteOptions::Fields() {
                              .max = 50,
                              .advanced = true});
     t.Add(&O::refine_boundary,
-          {.name = "refine-boundary", .help = "boundary refinement by local alpha estimation"});
+          {.name = "refine-boundary",
+           .help = "boundary refinement to an alpha matte by local alpha estimation"});
+    t.Add(&O::check_border,
+          {.name = "check-border",
+           .help = "stop when a silhouette reaches the frame's border (the frame cuts the object)",
+           .advanced = true});
+    t.Add(&O::multi_view,
+          {.name = "multi-view",
+           .help = "segment again a view whose silhouette disagrees with the other views' hull"});
     t.Add(&O::min_component_fraction,
           {.name = "min-component-fraction",
            .help = "object pieces smaller than this fraction of the largest are dropped",
@@ -327,8 +712,10 @@ void SilhouetteOptions::Validate() const {
 
 cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
                           const SilhouetteOptions& options, const cv::Mat& background,
-                          const std::string& name, SilhouetteStats* stats) {
+                          const std::string& name, SilhouetteStats* stats, const cv::Mat& prior) {
   options.Validate();
+  CAROUSEL_THROW_IF(!prior.empty() && (prior.type() != CV_8UC1 || prior.size() != image.size()),
+                    InvalidArgument, name << ": the silhouette prior must be 8-bit, photo-sized");
   CAROUSEL_THROW_IF(image.empty() || image.type() != CV_8UC3, InvalidArgument,
                     name << ": silhouettes need an 8-bit BGR photo");
   CAROUSEL_THROW_IF(image.cols != camera.width || image.rows != camera.height, InvalidArgument,
@@ -408,6 +795,11 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
       const auto min_plate = std::max<std::size_t>(10, plate_samples.size() / 5);
       have_plate = FitColourModel(plate_samples, plate_seed, 3, floor, min_plate, &plate_colour) ||
                    FitColourModel(plate_samples, plate_seed, 1, floor, min_plate, &plate_colour);
+      // A product larger than the plate hides it, and the fit then found the product's own
+      // colour: the plate counts only where some of its edge is seen against the backdrop.
+      if (have_plate && VisiblePlateEdge(image, plate, rim, backdrop, plate_colour,
+                                         Classifier(options)) < kMinVisiblePlateEdge)
+        have_plate = false;
       if (!have_plate)
         CAROUSEL_LOG_WARN(name << ": the turntable plate is hidden; it is treated as backdrop");
     }
@@ -416,16 +808,6 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
   // --- classification --------------------------------------------------------------------------
   const Classifier classifier(options);
   const double rim_tolerance = options.noise_threshold + options.chroma_threshold;
-  auto expected = [&](int x, int y) -> cv::Vec3f {
-    if (difference) {
-      const auto& b = smoothed_background.at<cv::Vec3b>(y, x);
-      return {static_cast<float>(b[0]), static_cast<float>(b[1]), static_cast<float>(b[2])};
-    }
-    const double nx = (x + 0.5) / width * 2.0 - 1.0;
-    const double ny = (y + 0.5) / height * 2.0 - 1.0;
-    if (have_plate && plate.at<std::uint8_t>(y, x)) return plate_colour.At(nx, ny);
-    return backdrop.At(nx, ny);
-  };
   // Per row, the models are quadratics in x: evaluated once per row into buffers.
   cv::Mat fg(height, width, CV_8UC1);
   std::vector<cv::Vec3f> backdrop_row(width), plate_row(width);
@@ -460,60 +842,47 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
   }
 
   int components = 0;
+  const ExpectedBackground expected = [&](int x, int y) -> cv::Vec3f {
+    if (difference) {
+      const auto& b = smoothed_background.at<cv::Vec3b>(y, x);
+      return {static_cast<float>(b[0]), static_cast<float>(b[1]), static_cast<float>(b[2])};
+    }
+    const double nx = (x + 0.5) / width * 2.0 - 1.0;
+    const double ny = (y + 0.5) / height * 2.0 - 1.0;
+    if (have_plate && plate.at<std::uint8_t>(y, x)) return plate_colour.At(nx, ny);
+    return backdrop.At(nx, ny);
+  };
+  cv::Mat candidates = fg;
+  fg = SegmentByGraphCut(image, candidates, expected, options, prior, name);
   RemoveSmallComponents(&fg, options.min_component_fraction, &components);
   const double object_area = cv::countNonZero(fg);
-  FillSmallHoles(&fg, options.max_hole_fraction * object_area);
-
-  // --- boundary refinement: local alpha from the colour line between B and F ------------------
-  if (options.refine_boundary && object_area > 0) {
-    constexpr int kBand = 2;    // pixels either side of the boundary
-    constexpr int kWindow = 9;  // neighbourhood for the object colour F
-    cv::Rect roi = cv::boundingRect(fg);
-    roi.x -= kWindow + kBand;
-    roi.y -= kWindow + kBand;
-    roi.width += 2 * (kWindow + kBand);
-    roi.height += 2 * (kWindow + kBand);
-    roi &= cv::Rect(0, 0, width, height);
-    const cv::Mat fg_roi = fg(roi);
-    cv::Mat grown, shrunk, confident;
-    const cv::Mat kernel = cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(5, 5));
-    cv::dilate(fg_roi, grown, kernel);
-    cv::erode(fg_roi, shrunk, kernel);
-    cv::erode(fg_roi, confident, kernel, cv::Point(-1, -1), 1);
-    cv::Mat weight;
-    confident.convertTo(weight, CV_32F, 1.0 / 255.0);
-    cv::Mat colour;
-    image(roi).convertTo(colour, CV_32FC3);
-    cv::Mat weighted;
-    cv::Mat weight3;
-    cv::merge(std::vector<cv::Mat>{weight, weight, weight}, weight3);
-    cv::multiply(colour, weight3, weighted);
-    cv::Mat sum_colour, sum_weight;
-    cv::boxFilter(weighted, sum_colour, CV_32F, cv::Size(kWindow, kWindow), cv::Point(-1, -1),
-                  false);
-    cv::boxFilter(weight, sum_weight, CV_32F, cv::Size(kWindow, kWindow), cv::Point(-1, -1), false);
-    cv::Mat refined = fg_roi.clone();
-    const double min_contrast = 2.0 * std::max(options.noise_threshold, 4.0);
-    for (int y = 0; y < roi.height; ++y) {
-      for (int x = 0; x < roi.width; ++x) {
-        if (!grown.at<std::uint8_t>(y, x) || shrunk.at<std::uint8_t>(y, x)) continue;
-        const float w = sum_weight.at<float>(y, x);
-        if (w < 1.0f) continue;
-        const cv::Vec3f f = sum_colour.at<cv::Vec3f>(y, x) / w;
-        const cv::Vec3f b = expected(x + roi.x, y + roi.y);
-        const cv::Vec3f fb = f - b;
-        const double contrast_sq = fb.dot(fb);
-        if (contrast_sq < min_contrast * min_contrast) continue;
-        const double alpha = (colour.at<cv::Vec3f>(y, x) - b).dot(fb) / contrast_sq;
-        refined.at<std::uint8_t>(y, x) = alpha >= 0.5 ? 255 : 0;
-      }
+  if (options.check_border && prior.empty()) {
+    // Candidates that reach the border, whose colours the border band shows, were all taken
+    // for backdrop: when that leaves almost nothing of them, the object itself crosses the
+    // frame's border.
+    RemoveSmallComponents(&candidates, 0.5, &components);
+    const double largest = cv::countNonZero(candidates);
+    if (largest > kMinObjectFraction * static_cast<double>(fg.total()) &&
+        object_area < kMinKeptOfCandidates * largest) {
+      std::ostringstream reason;
+      reason << "the object touches the image border: the frame's edge shows the colours of "
+             << cvRound(100.0 * (1.0 - object_area / largest))
+             << "% of what differs from the backdrop, so it is cut by the frame (or the "
+                "backdrop is cluttered); frame the object with a margin";
+      throw FormatError(name, reason.str());
     }
-    refined.copyTo(fg(roi));
-    RemoveSmallComponents(&fg, options.min_component_fraction, &components);
   }
+  if (object_area < kMinObjectFraction * static_cast<double>(fg.total()))
+    throw FormatError(name,
+                      "no object found: the photo shows only the backdrop (or the object "
+                      "matches it everywhere)");
+  FillSmallHoles(&fg, options.max_hole_fraction * object_area);
+  if (options.check_border) CheckClearOfBorder(fg, name);
+  CheckExposure(image, fg, name);
+  if (options.refine_boundary) RefineToAlpha(image, options, &fg);
 
   if (stats != nullptr) {
-    stats->object_fraction = cv::countNonZero(fg) / static_cast<double>(fg.total());
+    stats->object_fraction = cv::countNonZero(fg >= 128) / static_cast<double>(fg.total());
     stats->backdrop_residual = backdrop.rms;
     stats->components = components;
   }
@@ -522,7 +891,8 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
 
 SilhouettesResult ComputeSilhouettes(const std::vector<View>& views,
                                      const std::vector<cv::Mat>& backgrounds,
-                                     const SilhouetteOptions& options, Progress& progress) {
+                                     const SilhouetteOptions& options, Progress& progress,
+                                     const VisualHullOptions& hull) {
   options.Validate();
   if (options.method == SilhouetteMethod::kDifference) {
     CAROUSEL_THROW_IF(backgrounds.size() != views.size(), InvalidArgument,
@@ -547,7 +917,67 @@ SilhouettesResult ComputeSilhouettes(const std::vector<View>& views,
     }
   });
   progress.EndStage();
+  if (options.multi_view && views.size() >= kMinConsistencyViews)
+    MakeConsistent(views, backgrounds, options, hull, &result, progress);
   return result;
+}
+
+void MakeConsistent(const std::vector<View>& views, const std::vector<cv::Mat>& backgrounds,
+                    const SilhouetteOptions& options, const VisualHullOptions& hull,
+                    SilhouettesResult* result, Progress& progress) {
+  VisualHullOptions hull_options = hull;
+  hull_options.threads = options.threads;
+  const std::vector<cv::Mat> priors = OthersHullPriors(views, result->masks, hull_options);
+  if (priors.empty()) return;  // an empty silhouette: the hull names it
+  // The views that disagree with the others' hull: object where no other view allows it, or
+  // backdrop where every other view says object.
+  std::vector<std::size_t> disagreeing;
+  for (std::size_t v = 0; v < views.size(); ++v) {
+    const cv::Mat object = result->masks[v] >= 128;
+    // Slivers along the outline do not count: the grid is coarse.
+    const cv::Mat sliver = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3));
+    cv::Mat spill_map, hole_map;
+    cv::erode(object & (priors[v] == 0), spill_map, sliver);
+    cv::erode(~object & (priors[v] == 255), hole_map, sliver);
+    const int spill = cv::countNonZero(spill_map);
+    const int hole = cv::countNonZero(hole_map);
+    result->stats[v].outside_others = spill;
+    result->stats[v].hole_in_others = hole;
+    const double area = cv::countNonZero(object);
+    // A hole carves a tunnel through the hull whatever its size; a spill is only carved.
+    if (hole > kMinDisagreementPx ||
+        spill > std::max(kMinDisagreementPx, kMinDisagreementFraction * area))
+      disagreeing.push_back(v);
+  }
+  if (disagreeing.empty()) return;
+  progress.BeginStage("silhouettes: multi-view consistency");
+  std::atomic<std::size_t> done{0};
+  ParallelFor(disagreeing.size(), 1, options.threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t k = begin; k < end; ++k) {
+      progress.CheckCancelled();
+      const std::size_t v = disagreeing[k];
+      const View& view = views[v];
+      const cv::Mat background =
+          options.method == SilhouetteMethod::kDifference ? backgrounds[v] : cv::Mat();
+      SilhouetteStats stats = result->stats[v];
+      const cv::Mat before = result->masks[v] >= 128;
+      result->masks[v] = ComputeSilhouette(view.Image(), view.camera(), options, background,
+                                           view.name(), &stats, priors[v]);
+      view.ReleasePixels();
+      const cv::Mat after = result->masks[v] >= 128;
+      stats.outside_others = result->stats[v].outside_others;
+      stats.hole_in_others = result->stats[v].hole_in_others;
+      stats.redecided = true;
+      stats.pixels_removed = cv::countNonZero(before & ~after);
+      stats.pixels_added = cv::countNonZero(~before & after);
+      result->stats[v] = stats;
+      CAROUSEL_LOG_INFO(view.name() << ": silhouette re-decided against the other views' hull ("
+                                    << stats.pixels_removed << " pixels outside it removed, "
+                                    << stats.pixels_added << " added)");
+      progress.Report(++done, disagreeing.size());
+    }
+  });
+  progress.EndStage();
 }
 
 double MaskIoU(const cv::Mat& a, const cv::Mat& b) {

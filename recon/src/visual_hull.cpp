@@ -24,7 +24,10 @@ namespace {
 constexpr double kNearM = 1e-3;          // points closer to a camera are not projected
 constexpr double kFootprintSlack = 1.2;  // projected-radius safety factor (lens distortion)
 constexpr int kRootCells = 32;           // root grid cells along the longest side, at most
-constexpr int kConsistencyGrid = 48;     // points per axis for the consistency check
+constexpr int kConsistencyGrid = 48;
+constexpr int kPriorGrid = 96;         // cells per axis for the others' hull priors
+constexpr double kPriorSize = 1024.0;  // longest mask side the priors are computed at     // points
+                                       // per axis for the consistency check
 
 // Signed distance to the silhouette boundary in pixels, positive inside, over a crop of the
 // image around the silhouette; outside the crop a lower bound of the true (negative) distance.
@@ -113,6 +116,14 @@ struct ViewData {
   double focal_max = 0.0;
   double focal_mean = 0.0;
   std::unique_ptr<DistanceMap> distance;
+
+  void SetCamera(const CameraModel& c) {
+    camera = &c;
+    rotation = c.cam_from_world.rotation;
+    translation = c.cam_from_world.translation;
+    focal_max = std::max(c.fx, c.fy);
+    focal_mean = 0.5 * (c.fx + c.fy);
+  }
 };
 
 enum class CellClass { kOut, kIn, kAmbiguous };
@@ -400,6 +411,49 @@ Contour ContourCells(const std::vector<Eigen::Vector3i>& cells, int level, const
   return result;
 }
 
+// The region to carve: a cube around the point nearest the rays through the silhouettes'
+// centroids, large enough for every silhouette's box, cut at the floor.
+// \throw FormatError for inconsistent calibrations.
+Eigen::AlignedBox3d CarvingRegion(const std::vector<View>& views, const std::vector<ViewData>& data,
+                                  const VisualHullOptions& options) {
+  std::vector<Ray> rays;
+  double half_extent = 0.0;
+  for (std::size_t i = 0; i < views.size(); ++i) {
+    const auto ray = data[i].camera->RayThrough(data[i].distance->centroid());
+    CAROUSEL_CHECK(ray.has_value(), "no ray through the centroid of " << views[i].name());
+    rays.push_back(*ray);
+  }
+  const Eigen::Vector3d centre = ClosestPointToRays(rays);
+  for (std::size_t i = 0; i < views.size(); ++i) {
+    const cv::Rect& box = data[i].distance->box();
+    const CameraModel& camera = *data[i].camera;
+    const Eigen::Vector3d p =
+        camera.cam_from_world.rotation * centre + camera.cam_from_world.translation;
+    if (p.z() <= kNearM)
+      throw FormatError(MasksLocation(views),
+                        views[i].name() +
+                            ": the silhouettes' common centre lies behind this "
+                            "camera; the views' calibration is inconsistent");
+    const auto c = camera.ProjectFromCam(p);
+    double extent_px = 0.0;
+    for (const auto& corner : {cv::Point2d(box.x, box.y), cv::Point2d(box.br().x, box.y),
+                               cv::Point2d(box.x, box.br().y), cv::Point2d(box.br())})
+      extent_px = std::max(extent_px, std::hypot(corner.x - c.x(), corner.y - c.y()));
+    half_extent = std::max(half_extent, 1.3 * extent_px * p.z() / data[i].focal_mean);
+  }
+  Eigen::AlignedBox3d region(centre - Eigen::Vector3d::Constant(half_extent),
+                             centre + Eigen::Vector3d::Constant(half_extent));
+  if (options.use_floor) {
+    if (region.max().z() <= options.floor_z_m)
+      throw FormatError(
+          MasksLocation(views),
+          "the silhouettes meet below the floor (z = " + std::to_string(options.floor_z_m) +
+              " m); the views' calibration does not match the rig");
+    region.min().z() = std::max(region.min().z(), options.floor_z_m);
+  }
+  return region;
+}
+
 }  // namespace
 
 const OptionTable<VisualHullOptions>& VisualHullOptions::Fields() {
@@ -487,11 +541,7 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views, const VisualH
       view.camera().Validate();
       const cv::Mat mask = view.Mask();
       ViewData& d = data[i];
-      d.camera = &view.camera();
-      d.rotation = view.camera().cam_from_world.rotation;
-      d.translation = view.camera().cam_from_world.translation;
-      d.focal_max = std::max(view.camera().fx, view.camera().fy);
-      d.focal_mean = 0.5 * (view.camera().fx + view.camera().fy);
+      d.SetCamera(view.camera());
       if (cv::countNonZero(mask >= 128) == 0) {  // collected, to name every empty view
         std::lock_guard<std::mutex> lock(empty_mutex);
         empty_views.push_back(view.name());
@@ -515,41 +565,7 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views, const VisualH
   const Carver carver(data);
 
   // --- the region to carve ---------------------------------------------------------------------
-  std::vector<Ray> rays;
-  double half_extent = 0.0;
-  for (std::size_t i = 0; i < views.size(); ++i) {
-    const auto ray = views[i].camera().RayThrough(data[i].distance->centroid());
-    CAROUSEL_CHECK(ray.has_value(), "no ray through the centroid of " << views[i].name());
-    rays.push_back(*ray);
-  }
-  const Eigen::Vector3d centre = ClosestPointToRays(rays);
-  for (std::size_t i = 0; i < views.size(); ++i) {
-    const cv::Rect& box = data[i].distance->box();
-    const CameraModel& camera = views[i].camera();
-    const Eigen::Vector3d p =
-        camera.cam_from_world.rotation * centre + camera.cam_from_world.translation;
-    if (p.z() <= kNearM)
-      throw FormatError(MasksLocation(views),
-                        views[i].name() +
-                            ": the silhouettes' common centre lies behind this "
-                            "camera; the views' calibration is inconsistent");
-    const auto c = camera.ProjectFromCam(p);
-    double extent_px = 0.0;
-    for (const auto& corner : {cv::Point2d(box.x, box.y), cv::Point2d(box.br().x, box.y),
-                               cv::Point2d(box.x, box.br().y), cv::Point2d(box.br())})
-      extent_px = std::max(extent_px, std::hypot(corner.x - c.x(), corner.y - c.y()));
-    half_extent = std::max(half_extent, 1.3 * extent_px * p.z() / data[i].focal_mean);
-  }
-  Eigen::AlignedBox3d region(centre - Eigen::Vector3d::Constant(half_extent),
-                             centre + Eigen::Vector3d::Constant(half_extent));
-  if (options.use_floor) {
-    if (region.max().z() <= options.floor_z_m)
-      throw FormatError(
-          MasksLocation(views),
-          "the silhouettes meet below the floor (z = " + std::to_string(options.floor_z_m) +
-              " m); the views' calibration does not match the rig");
-    region.min().z() = std::max(region.min().z(), options.floor_z_m);
-  }
+  const Eigen::AlignedBox3d region = CarvingRegion(views, data, options);
 
   // --- view consistency (coarse) and the object's bounding box ---------------------------------
   progress.BeginStage("visual hull: carving");
@@ -766,6 +782,120 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views, const VisualH
     CAROUSEL_LOG_INFO("visual hull: dropped " << result.components_dropped << " small pieces ("
                                               << result.faces_dropped << " faces)");
   return result;
+}
+
+std::vector<cv::Mat> OthersHullPriors(const std::vector<View>& views,
+                                      const std::vector<cv::Mat>& masks,
+                                      const VisualHullOptions& options) {
+  CAROUSEL_THROW_IF(
+      masks.size() != views.size(), InvalidArgument,
+      "OthersHullPriors: " << masks.size() << " masks for " << views.size() << " views");
+  const std::size_t n = views.size();
+  const int threads = ResolveThreadCount(options.threads);
+  // Masks and cameras at a working resolution: the grid is coarse.
+  std::vector<CameraModel> cameras(n);
+  std::vector<ViewData> data(n);
+  std::vector<double> scales(n, 1.0);
+  ParallelFor(n, 1, threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t v = begin; v < end; ++v) {
+      const cv::Mat& mask = masks[v];
+      CAROUSEL_THROW_IF(mask.type() != CV_8UC1 || mask.cols != views[v].camera().width ||
+                            mask.rows != views[v].camera().height,
+                        InvalidArgument,
+                        views[v].name() << ": the mask does not match the camera's image size");
+      scales[v] = std::min(1.0, kPriorSize / std::max(mask.cols, mask.rows));
+      cameras[v] = scales[v] < 1.0 ? views[v].camera().Scaled(scales[v]) : views[v].camera();
+      cv::Mat small = mask;
+      if (scales[v] < 1.0)
+        cv::resize(mask, small, cv::Size(cameras[v].width, cameras[v].height), 0, 0,
+                   cv::INTER_AREA);
+      data[v].SetCamera(cameras[v]);
+      if (cv::countNonZero(small >= 128) > 0)
+        data[v].distance = std::make_unique<DistanceMap>(small, views[v].name());
+    }
+  });
+  for (std::size_t v = 0; v < n; ++v)
+    if (!data[v].distance) return {};  // an empty silhouette: the hull names it
+  const Eigen::AlignedBox3d region = CarvingRegion(views, data, options);
+  const Eigen::Vector3d step = region.sizes() / kPriorGrid;
+  const double rho = 0.5 * step.norm();  // a cell's circumscribed radius
+  const double inner = 0.5 * step.minCoeff();
+  // Per cell and view: wholly outside (the silhouette carves it), or wholly inside.
+  const int cells_per_axis = kPriorGrid;
+  const std::size_t cells =
+      static_cast<std::size_t>(cells_per_axis) * cells_per_axis * cells_per_axis;
+  std::vector<std::uint16_t> outside(cells, 0), not_inside(cells, 0);
+  auto cell_centre = [&](std::size_t c) {
+    const std::size_t i = c % cells_per_axis;
+    const std::size_t j = (c / cells_per_axis) % cells_per_axis;
+    const std::size_t k = c / (static_cast<std::size_t>(cells_per_axis) * cells_per_axis);
+    return Eigen::Vector3d(region.min() + step.cwiseProduct(Eigen::Vector3d(
+                                              i + 0.5, j + 0.5, static_cast<double>(k) + 0.5)));
+  };
+  // Per cell, the view it fails when it fails one: a cell failing two is outside every other
+  // view's hull anyway.
+  std::vector<std::int16_t> only_outside(cells, -1), only_not_inside(cells, -1);
+  ParallelFor(cells, 4096, threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t c = begin; c < end; ++c) {
+      const Eigen::Vector3d x = cell_centre(c);
+      for (std::size_t v = 0; v < n; ++v) {
+        const ViewData& d = data[v];
+        const Eigen::Vector3d p = d.rotation * x + d.translation;
+        if (p.z() - rho <= kNearM) continue;  // unknown
+        const Eigen::Vector2d pixel = d.camera->ProjectFromCam(p);
+        const DistanceMap& dm = *d.distance;
+        if (!dm.InImage(pixel.x(), pixel.y())) continue;  // off the photo: unknown
+        const double r = d.focal_max * rho / (p.z() - rho) + 1.0;
+        const double sd = dm.At(pixel.x(), pixel.y());
+        if (sd < -r) {
+          ++outside[c];
+          only_outside[c] = static_cast<std::int16_t>(v);
+        }
+        if (sd <= r) {
+          ++not_inside[c];
+          only_not_inside[c] = static_cast<std::int16_t>(v);
+        }
+      }
+    }
+  });
+  // Per view, the cells of the others' hull splatted into its image: grown (the cell's
+  // circumscribed footprint) for "may be object", shrunk (its inscribed one) for "is object".
+  std::vector<cv::Mat> priors(n);
+  ParallelFor(n, 1, threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t v = begin; v < end; ++v) {
+      const ViewData& d = data[v];
+      cv::Mat may(cameras[v].height, cameras[v].width, CV_8UC1, cv::Scalar(0));
+      cv::Mat is(may.size(), CV_8UC1, cv::Scalar(0));
+      for (std::size_t c = 0; c < cells; ++c) {
+        const bool in_may =
+            outside[c] == 0 || (outside[c] == 1 && only_outside[c] == static_cast<int>(v));
+        if (!in_may) continue;
+        const Eigen::Vector3d p = d.rotation * cell_centre(c) + d.translation;
+        if (p.z() - rho <= kNearM) continue;
+        const Eigen::Vector2d pixel = d.camera->ProjectFromCam(p);
+        const double r_out = d.focal_max * rho / (p.z() - rho) + 1.0;
+        const cv::Point centre(cvRound(pixel.x()), cvRound(pixel.y()));
+        cv::circle(may, centre, static_cast<int>(std::ceil(r_out)), cv::Scalar(255), cv::FILLED);
+        const bool in_is =
+            not_inside[c] == 0 || (not_inside[c] == 1 && only_not_inside[c] == static_cast<int>(v));
+        if (in_is) {
+          const double r_in = d.focal_mean * inner / (p.z() + rho) - 1.0;
+          if (r_in >= 1.0)
+            cv::circle(is, centre, static_cast<int>(r_in), cv::Scalar(255), cv::FILLED);
+        }
+      }
+      cv::Mat prior(may.size(), CV_8UC1, cv::Scalar(128));
+      prior.setTo(0, may == 0);
+      prior.setTo(255, is);
+      if (scales[v] < 1.0) {
+        cv::Mat full;
+        cv::resize(prior, full, masks[v].size(), 0, 0, cv::INTER_NEAREST);
+        prior = full;
+      }
+      priors[v] = prior;
+    }
+  });
+  return priors;
 }
 
 }  // namespace carousel::recon

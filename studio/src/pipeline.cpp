@@ -50,6 +50,7 @@ std::string Describe(const ReconstructOptions& o) {
              "chroma", s.chroma_threshold)("shadow", s.min_shadow_brightness)(
              "highlight", s.max_highlight_brightness)("plate", s.plate_radius_m)(
              "rim_m", s.plate_rim_m)("rim_px", s.plate_rim_px)("refine", s.refine_boundary)(
+             "segmentation", 2)("border", s.check_border)("multi_view", s.multi_view)(
              "component", s.min_component_fraction)("hole", s.max_hole_fraction)(
              "voxel", h.voxel_size_m)("resolution", h.resolution)("voxel_px", h.voxel_px)(
              "max_resolution", h.max_resolution)("floor", h.use_floor)("floor_z", h.floor_z_m)(

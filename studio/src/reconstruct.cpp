@@ -87,7 +87,7 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
   if (options.silhouettes.method == recon::SilhouetteMethod::kDifference)
     backgrounds = LoadBackgrounds(session_folder, session);
   const recon::SilhouettesResult silhouettes =
-      recon::ComputeSilhouettes(views, backgrounds, options.silhouettes, progress);
+      recon::ComputeSilhouettes(views, backgrounds, options.silhouettes, progress, options.hull);
   std::filesystem::create_directories(session_folder / "masks");
   result.min_mask_fraction = 1.0;
   // The masks are encoded in parallel (18 MP PNGs take a few tenths of a second each); binary

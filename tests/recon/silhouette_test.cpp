@@ -71,17 +71,27 @@ TEST(SilhouetteTest, PlateRimSeenUpCloseIsNotObject) {
     CameraModel camera;
     // The frame's centre on the far rim where it disappears behind the object.
     const sim::RenderResult photo = RenderZoomed(capture.views[i], 5.0, 0.94, -0.78, &camera);
-    const cv::Mat mask = ComputeSilhouette(photo.image, camera, {}, {}, capture.views[i].name());
+    // A close-up: the object crosses the frame.
+    SilhouetteOptions close_up;
+    close_up.check_border = false;
+    const cv::Mat mask =
+        ComputeSilhouette(photo.image, camera, close_up, {}, capture.views[i].name());
     EXPECT_GE(MaskIoU(mask, photo.mask), 0.99) << capture.views[i].name();
   }
 }
 
-// Framed tight, the object covers a side of the photo's border, where the backdrop fit starts.
-TEST(SilhouetteTest, ObjectCoveringASideOfTheFrameIsKeyed) {
+// Framed tight, the object covers a side of the photo's border: its silhouette would be cut,
+// so the photo is named; a close-up (check_border off) is keyed, though the backdrop fit
+// starts at the border.
+TEST(SilhouetteTest, ObjectCoveringASideOfTheFrameIsNamed) {
   const sim::SimViews& capture = testing::SimulatedCapture("sphere");
   CameraModel camera;
   const sim::RenderResult photo = RenderZoomed(capture.views[0], 2.0, 0.5, 0.0, &camera);
-  const cv::Mat mask = ComputeSilhouette(photo.image, camera, {}, {}, "tight");
+  CAROUSEL_EXPECT_THROW_WITH(ComputeSilhouette(photo.image, camera, {}, {}, "tight.jpg"),
+                             FormatError, "tight.jpg: the object touches the image border");
+  SilhouetteOptions close_up;
+  close_up.check_border = false;
+  const cv::Mat mask = ComputeSilhouette(photo.image, camera, close_up, {}, "tight");
   EXPECT_GE(MaskIoU(mask, photo.mask), 0.99);
 }
 

@@ -18,10 +18,15 @@
 // the view's camera) is removed: inside its outline B is the plate's colour, fitted robustly
 // like the backdrop, and anti-aliased plate/backdrop rim pixels count as background, so the
 // plate never becomes part of the object. With kDifference the plate is already in B.
-// Then clean-up (specks, small holes) and boundary refinement: each boundary pixel gets
-// alpha = <I - B, F - B> / |F - B|^2 with F the local object colour (normalized convolution of
-// nearby confident object pixels), and is object when alpha >= 0.5, i.e. when the object
-// covers at least half of it. Masks are 8-bit, 255 = object (DESIGN.md).
+// The pixels that fail the test are candidates. A backdrop that is not smooth (cloth folds, a
+// stand, a dark cloth's sheen) fails it too, so the segmentation is a graph cut (GrabCut) at a
+// working resolution seeded with the candidates whose colour is not one of the frame's border
+// band (object) and the rest (background); the border band itself is background (a view whose
+// silhouette reaches it is rejected: the frame cuts the object).
+// Then clean-up (specks, small holes) and boundary refinement to an alpha matte: each pixel of
+// a band around the outline gets alpha = <I - B, F - B> / |F - B|^2 with F and B the local
+// object and background colours (normalized convolution of the confident pixels either side).
+// Masks are 8-bit alpha, 255 = object, >= 128 = object for the hull (DESIGN.md).
 #pragma once
 
 #include <string>
@@ -33,6 +38,7 @@
 #include "carousel/core/options.h"
 #include "carousel/core/progress.h"
 #include "carousel/core/view.h"
+#include "carousel/recon/visual_hull.h"
 
 namespace carousel::recon {
 
@@ -63,8 +69,17 @@ struct SilhouetteOptions {
   // z = 0), metres, 0..0.05, grown by plate_rim_px pixels (anti-aliasing), 0..50.
   double plate_rim_m = 0.0015;
   double plate_rim_px = 1.5;
-  // Boundary refinement by local alpha estimation.
+  // Boundary refinement to an 8-bit alpha matte by local alpha estimation.
   bool refine_boundary = true;
+  // Stop when a silhouette reaches the frame's border band (1% of the shorter side): the
+  // frame would cut it. Off for close-ups that show only part of the object; the border band
+  // then samples the backdrop only where the smooth backdrop model holds.
+  bool check_border = true;
+  // Multi-view consistency (4 views or more): a view whose silhouette disagrees with the hull
+  // of the other views (object outside it, backdrop well inside it) is segmented again with
+  // that hull as a prior (a see-through hole stays open: the neighbouring views see through
+  // it too, so it is not inside their hull).
+  bool multi_view = true;
   // Object components smaller than this fraction of the largest one are dropped, 0..1.
   double min_component_fraction = 0.002;
   // Background holes smaller than this fraction of the object's area are filled, 0..1.
@@ -80,27 +95,45 @@ struct SilhouetteStats {
   double object_fraction = 0.0;    // mask area / image area
   double backdrop_residual = 0.0;  // RMS of the fitted backdrop model on its inliers, levels
   int components = 0;              // object components kept
+  // Multi-view consistency: pixels of the first segmentation outside the other views' hull,
+  // and backdrop pixels well inside it; whether the view was segmented again, and what that
+  // changed.
+  int outside_others = 0;
+  int hole_in_others = 0;
+  bool redecided = false;
+  int pixels_removed = 0;
+  int pixels_added = 0;
 };
 
 // One photo's silhouette. `background` is the background plate (kDifference; same size,
-// CV_8UC3), ignored by kKey. `name` names the photo in errors.
+// CV_8UC3), ignored by kKey. `name` names the photo in errors. `prior` (optional, CV_8UC1,
+// photo-sized; OthersHullPriors): 0 = not object, 255 = probably object, 128 = undecided.
 // \throw InvalidArgument (image type, missing background, sizes), FormatError if the photo
-//        shows no backdrop to key against.
+//        shows no backdrop to key against, no object, an object touching the frame's border
+//        (with check_border) or is over-exposed.
 cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
                           const SilhouetteOptions& options, const cv::Mat& background = {},
-                          const std::string& name = "image", SilhouetteStats* stats = nullptr);
+                          const std::string& name = "image", SilhouetteStats* stats = nullptr,
+                          const cv::Mat& prior = {});
 
 struct SilhouettesResult {
   std::vector<cv::Mat> masks;  // per view, CV_8UC1
   std::vector<SilhouetteStats> stats;
 };
 
-// Silhouettes for all views (in parallel). `backgrounds`: per view (kDifference), may share
-// Mats between the views of one camera; empty for kKey.
+// Silhouettes for all views (in parallel), then multi-view consistency (options.multi_view).
+// `backgrounds`: per view (kDifference), may share Mats between the views of one camera;
+// empty for kKey. `hull`: the carving the consistency step assumes (floor).
 // \throw as ComputeSilhouette, IoError/FormatError for unreadable photos, Cancelled.
 SilhouettesResult ComputeSilhouettes(const std::vector<View>& views,
                                      const std::vector<cv::Mat>& backgrounds,
-                                     const SilhouetteOptions& options, Progress& progress);
+                                     const SilhouetteOptions& options, Progress& progress,
+                                     const VisualHullOptions& hull = {});
+
+// The consistency step alone, on `result` (from the first segmentation of every view).
+void MakeConsistent(const std::vector<View>& views, const std::vector<cv::Mat>& backgrounds,
+                    const SilhouetteOptions& options, const VisualHullOptions& hull,
+                    SilhouettesResult* result, Progress& progress);
 
 // Intersection over union of two masks (>= 128 = object). \pre same size, CV_8UC1.
 double MaskIoU(const cv::Mat& a, const cv::Mat& b);

@@ -21,6 +21,7 @@
 #include <vector>
 
 #include <Eigen/Geometry>
+#include <opencv2/core.hpp>
 
 #include "carousel/core/mesh.h"
 #include "carousel/core/options.h"
@@ -89,5 +90,16 @@ struct VisualHullResult {
 //        (the hull vanishes), IoError for unreadable masks, Cancelled.
 VisualHullResult ComputeVisualHull(const std::vector<View>& views, const VisualHullOptions& options,
                                    Progress& progress);
+
+// Multi-view consistency of silhouettes: per view, what the hull of all the OTHER views says
+// about each of its pixels, on a coarse grid (96 cells along the carved region). CV_8UC1 at
+// the mask's size: 0 = no cell of the others' hull projects there (grown by a cell: surely
+// not object), 255 = a cell wholly inside every other silhouette projects there (surely
+// object where the photo does not show the backdrop through a see-through hole), 128 =
+// undecided. Empty when a mask is empty. \pre masks[i] sized as views[i]'s camera.
+// \throw InvalidArgument (sizes), FormatError (inconsistent calibration).
+std::vector<cv::Mat> OthersHullPriors(const std::vector<View>& views,
+                                      const std::vector<cv::Mat>& masks,
+                                      const VisualHullOptions& options);
 
 }  // namespace carousel::recon
