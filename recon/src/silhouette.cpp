@@ -387,7 +387,7 @@ cv::Mat SegmentByGraphCut(const cv::Mat& image, const cv::Mat& candidates,
   cv::Mat pieces = candidates.clone();
   int unused = 0;
   RemoveSmallComponents(&pieces, 0.01, &unused);
-  if (!prior.empty()) pieces |= prior == 255;
+  if (!prior.empty()) pieces |= prior >= 192;
   if (cv::countNonZero(pieces) == 0) return cv::Mat::zeros(full, CV_8UC1);
   cv::Rect roi = cv::boundingRect(pieces);
   const int margin = std::max(8, std::max(roi.width, roi.height) / 10);
@@ -443,19 +443,28 @@ cv::Mat SegmentByGraphCut(const cv::Mat& image, const cv::Mat& candidates,
   {
     // The seeds' interior (specks and thin cloth folds eroded away) is surely object: colour
     // models of the whole region would otherwise take a white part before a white backdrop's
-    // darker patch for backdrop.
+    // darker patch for backdrop. With the other views' hull, only within it (a spill beside
+    // the object is left to the colours).
     cv::Mat sure = labels == cv::GC_PR_FGD;
     cv::erode(sure, sure, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(5, 5)));
+    if (!prior.empty()) {
+      cv::Mat small_prior;
+      cv::resize(prior(roi), small_prior, small.size(), 0, 0, cv::INTER_NEAREST);
+      sure &= small_prior >= 192;
+    }
     labels.setTo(cv::GC_FGD, sure);
   }
   if (!prior.empty()) {
-    // The other views' hull: nothing outside it is object; well inside it, a backdrop colour
-    // is probably the object's own (an eye's white before a white backdrop), since a
-    // see-through hole would be seen by the neighbouring views too and carved from it.
+    // The other views' hull decides instead: nothing outside it is object, and what lies deep
+    // inside it is object whatever its colour (an eye's white, a highlight, a print matching
+    // the backdrop; a see-through hole there would be seen by the neighbouring views too and
+    // carved from it). Inside it but near its outline, the backdrop's colour probably is the
+    // object's own, and plain backdrop stays (a loop seen through by few views). Elsewhere
+    // the colours decide.
     cv::Mat small_prior;
     cv::resize(prior(roi), small_prior, small.size(), 0, 0, cv::INTER_NEAREST);
-    labels.setTo(cv::GC_PR_FGD,
-                 (small_prior == 255) & ((labels == cv::GC_PR_BGD) | (labels == cv::GC_BGD)));
+    labels.setTo(cv::GC_PR_FGD, (small_prior == 192) & (labels == cv::GC_PR_BGD));
+    labels.setTo(cv::GC_FGD, small_prior == 255);
     labels.setTo(cv::GC_BGD, small_prior == 0);
   }
   if (options.check_border) {
@@ -927,18 +936,41 @@ void MakeConsistent(const std::vector<View>& views, const std::vector<cv::Mat>& 
                     SilhouettesResult* result, Progress& progress) {
   VisualHullOptions hull_options = hull;
   hull_options.threads = options.threads;
-  const std::vector<cv::Mat> priors = OthersHullPriors(views, result->masks, hull_options);
+  std::vector<cv::Mat> priors = OthersHullPriors(views, result->masks, hull_options);
   if (priors.empty()) return;  // an empty silhouette: the hull names it
   // The views that disagree with the others' hull: object where no other view allows it, or
   // backdrop where every other view says object.
   std::vector<std::size_t> disagreeing;
   for (std::size_t v = 0; v < views.size(); ++v) {
     const cv::Mat object = result->masks[v] >= 128;
+    // Deep inside the others' hull, only holes enclosed by the object are filled regardless of
+    // colour; backdrop open to the outside (under a sole's arch) is a concavity the others'
+    // hull may not have carved.
+    cv::Mat open_backdrop = ~object;
+    cv::Mat labels;
+    const int n = cv::connectedComponents(open_backdrop, labels, 4, CV_32S);
+    std::vector<std::uint8_t> touches(static_cast<std::size_t>(n), 0);
+    for (int x = 0; x < labels.cols; ++x) {
+      touches[static_cast<std::size_t>(labels.at<int>(0, x))] = 1;
+      touches[static_cast<std::size_t>(labels.at<int>(labels.rows - 1, x))] = 1;
+    }
+    for (int y = 0; y < labels.rows; ++y) {
+      touches[static_cast<std::size_t>(labels.at<int>(y, 0))] = 1;
+      touches[static_cast<std::size_t>(labels.at<int>(y, labels.cols - 1))] = 1;
+    }
+    touches[0] = 0;  // the object
+    for (int y = 0; y < labels.rows; ++y) {
+      const int* l = labels.ptr<int>(y);
+      std::uint8_t* o = open_backdrop.ptr<std::uint8_t>(y);
+      for (int x = 0; x < labels.cols; ++x)
+        o[x] = touches[static_cast<std::size_t>(l[x])] ? 255 : 0;
+    }
+    priors[v].setTo(192, (priors[v] == 255) & open_backdrop);
     // Slivers along the outline do not count: the grid is coarse.
     const cv::Mat sliver = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3));
     cv::Mat spill_map, hole_map;
     cv::erode(object & (priors[v] == 0), spill_map, sliver);
-    cv::erode(~object & (priors[v] == 255), hole_map, sliver);
+    cv::erode(~object & ~open_backdrop & (priors[v] >= 192), hole_map, sliver);
     const int spill = cv::countNonZero(spill_map);
     const int hole = cv::countNonZero(hole_map);
     result->stats[v].outside_others = spill;

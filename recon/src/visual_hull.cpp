@@ -816,7 +816,36 @@ std::vector<cv::Mat> OthersHullPriors(const std::vector<View>& views,
   });
   for (std::size_t v = 0; v < n; ++v)
     if (!data[v].distance) return {};  // an empty silhouette: the hull names it
-  const Eigen::AlignedBox3d region = CarvingRegion(views, data, options);
+  const Eigen::AlignedBox3d carved = CarvingRegion(views, data, options);
+  // The grid spans the others' hull's box (points inside every silhouette on a coarser grid,
+  // grown by a coarse step), not the whole carved region: finer cells for the same count.
+  Eigen::AlignedBox3d region;
+  {
+    const Carver carver(data);
+    const Eigen::Vector3d coarse = carved.sizes() / kConsistencyGrid;
+    std::mutex merge;
+    ParallelFor(static_cast<std::size_t>(kConsistencyGrid), 1, threads,
+                [&](std::size_t begin, std::size_t end) {
+                  Eigen::AlignedBox3d local;
+                  for (std::size_t k = begin; k < end; ++k)
+                    for (int j = 0; j < kConsistencyGrid; ++j)
+                      for (int i = 0; i < kConsistencyGrid; ++i) {
+                        const Eigen::Vector3d x =
+                            carved.min() + coarse.cwiseProduct(Eigen::Vector3d(
+                                               i + 0.5, j + 0.5, static_cast<double>(k) + 0.5));
+                        int outside = 0;
+                        for (std::size_t v = 0; v < n && outside < 2; ++v)
+                          outside += carver.PointState(v, x) < 0 ? 1 : 0;
+                        if (outside < 2) local.extend(x);  // in the hull of all but one view
+                      }
+                  std::lock_guard<std::mutex> lock(merge);
+                  region.extend(local);
+                });
+    if (region.isEmpty()) return {};  // no common volume: the hull names the views
+    region.min() -= 2.0 * coarse;
+    region.max() += 2.0 * coarse;
+    region = region.intersection(carved);
+  }
   const Eigen::Vector3d step = region.sizes() / kPriorGrid;
   const double rho = 0.5 * step.norm();  // a cell's circumscribed radius
   const double inner = 0.5 * step.minCoeff();
@@ -866,6 +895,8 @@ std::vector<cv::Mat> OthersHullPriors(const std::vector<View>& views,
       const ViewData& d = data[v];
       cv::Mat may(cameras[v].height, cameras[v].width, CV_8UC1, cv::Scalar(0));
       cv::Mat is(may.size(), CV_8UC1, cv::Scalar(0));
+      double footprint_sum = 0.0;
+      int footprints = 0;
       for (std::size_t c = 0; c < cells; ++c) {
         const bool in_may =
             outside[c] == 0 || (outside[c] == 1 && only_outside[c] == static_cast<int>(v));
@@ -874,19 +905,29 @@ std::vector<cv::Mat> OthersHullPriors(const std::vector<View>& views,
         if (p.z() - rho <= kNearM) continue;
         const Eigen::Vector2d pixel = d.camera->ProjectFromCam(p);
         const double r_out = d.focal_max * rho / (p.z() - rho) + 1.0;
+        footprint_sum += r_out;
+        ++footprints;
         const cv::Point centre(cvRound(pixel.x()), cvRound(pixel.y()));
         cv::circle(may, centre, static_cast<int>(std::ceil(r_out)), cv::Scalar(255), cv::FILLED);
         const bool in_is =
             not_inside[c] == 0 || (not_inside[c] == 1 && only_not_inside[c] == static_cast<int>(v));
         if (in_is) {
-          const double r_in = d.focal_mean * inner / (p.z() + rho) - 1.0;
-          if (r_in >= 1.0)
-            cv::circle(is, centre, static_cast<int>(r_in), cv::Scalar(255), cv::FILLED);
+          const double r_in = d.focal_mean * inner / (p.z() + rho);
+          cv::circle(is, centre, std::max(1, static_cast<int>(r_in)), cv::Scalar(255), cv::FILLED);
         }
       }
+      // Deep inside: a cell's footprint within the others' hull's inner region. Nearer the
+      // outline, the hull of the others may be fatter than the object (a see-through loop
+      // seen through by few views).
+      cv::Mat deep;
+      const int reach = static_cast<int>(std::ceil(footprint_sum / std::max(1, footprints)));
+      cv::erode(
+          is, deep,
+          cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * reach + 1, 2 * reach + 1)));
       cv::Mat prior(may.size(), CV_8UC1, cv::Scalar(128));
       prior.setTo(0, may == 0);
-      prior.setTo(255, is);
+      prior.setTo(192, is);
+      prior.setTo(255, deep);
       if (scales[v] < 1.0) {
         cv::Mat full;
         cv::resize(prior, full, masks[v].size(), 0, 0, cv::INTER_NEAREST);

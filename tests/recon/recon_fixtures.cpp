@@ -22,6 +22,11 @@ const sim::SimViews& SimulatedCapture(const std::string& name) {
     scene = sim::MakeRingScene(0.4 * kSize, 0.1 * kSize);
   } else if (name == "sphere") {
     scene = sim::MakeSphereScene(0.5 * kSize, {0.0, 0.0, 0.5 * kSize}, 5);
+  } else if (name == "duck") {
+    // Wider than the plate, which it hides; an eye's white as light as the backdrop.
+    scene = sim::LoadScene(carousel::testing::SharedDataFile("models/Duck/glTF/Duck.gltf"));
+    sim::PlaceOnTurntable(scene, {.target_height_m = 0.45});
+    stops = 12;
   } else {
     const std::string file = name == "shoe"
                                  ? "models/MaterialsVariantsShoe/glTF/MaterialsVariantsShoe.gltf"

@@ -40,6 +40,7 @@ INSTANTIATE_TEST_SUITE_P(Scenes, SilhouetteOnScene,
                          ::testing::Values(std::make_pair("shoe", SilhouetteMethod::kKey),
                                            std::make_pair("bottle", SilhouetteMethod::kKey),
                                            std::make_pair("ring", SilhouetteMethod::kKey),
+                                           std::make_pair("duck", SilhouetteMethod::kKey),
                                            std::make_pair("shoe", SilhouetteMethod::kDifference),
                                            std::make_pair("bottle", SilhouetteMethod::kDifference)),
                          [](const auto& param_info) {
@@ -119,6 +120,75 @@ TEST(SilhouetteTest, ShadowOnTheBackdropIsNotObject) {
   EXPECT_GE(MaskIoU(mask, truth), 0.985);
   cv::Mat spill = (mask >= 128) & (truth < 128) & (shade < 0.95);
   EXPECT_LT(cv::countNonZero(spill), 20);
+}
+
+// Fresh views with copies of a capture's photos (the cached capture stays untouched).
+std::vector<View> CopyViews(const sim::SimViews& capture) {
+  std::vector<View> views;
+  for (const View& view : capture.views) {
+    View copy(view.camera(), {}, {}, view.table_angle_rad());
+    copy.set_name(view.name());
+    copy.SetImage(view.Image().clone());
+    views.push_back(std::move(copy));
+  }
+  return views;
+}
+
+// One photo shows the backdrop through the object where nothing is see-through (a highlight
+// or a printed patch that matches the backdrop): keyed alone, that view would carve a tunnel
+// through the hull. The other views' hull repairs it. A patch of cloth beside the object in
+// another view (a dark fold the border does not show) is removed the same way.
+TEST(SilhouetteTest, TheOtherViewsRepairAFalseHoleAndRemoveASpill) {
+  const sim::SimViews& capture = testing::SimulatedCapture("bottle");
+  std::vector<View> views = CopyViews(capture);
+  const std::size_t holed = 3;
+  const std::size_t spilled = 7;
+  {
+    cv::Mat image = views[holed].Image().clone();
+    const cv::Rect box = cv::boundingRect(capture.truth_masks[holed]);
+    cv::Mat hole = cv::Mat::zeros(image.size(), CV_8UC1);
+    cv::circle(hole, {box.x + box.width / 2, box.y + box.height / 2}, box.width / 5,
+               cv::Scalar(255), cv::FILLED);
+    capture.backgrounds[holed].copyTo(image, hole);
+    views[holed].SetImage(image);
+  }
+  cv::Mat spill = cv::Mat::zeros(capture.truth_masks[spilled].size(), CV_8UC1);
+  {
+    cv::Mat image = views[spilled].Image().clone();
+    const cv::Rect box = cv::boundingRect(capture.truth_masks[spilled]);
+    cv::ellipse(spill, {box.br().x, box.y + box.height / 2}, {box.width / 3, box.height / 8}, 0, 0,
+                360, cv::Scalar(255), cv::FILLED);
+    spill &= capture.truth_masks[spilled] < 128;
+    image.setTo(cv::Scalar(40, 30, 90), spill);
+    views[spilled].SetImage(image);
+  }
+  SilhouetteOptions single;
+  single.multi_view = false;
+  Progress progress;
+  const SilhouettesResult alone = ComputeSilhouettes(views, {}, single, progress);
+  EXPECT_LT(MaskIoU(alone.masks[holed], capture.truth_masks[holed]), 0.97);
+  EXPECT_LT(MaskIoU(alone.masks[spilled], capture.truth_masks[spilled]), 0.97);
+
+  const SilhouettesResult repaired = ComputeSilhouettes(views, {}, {}, progress);
+  for (std::size_t i = 0; i < views.size(); ++i)
+    EXPECT_GE(MaskIoU(repaired.masks[i], capture.truth_masks[i]), 0.99) << views[i].name();
+  EXPECT_TRUE(repaired.stats[holed].redecided);
+  EXPECT_GT(repaired.stats[holed].pixels_added, 1000);
+  EXPECT_TRUE(repaired.stats[spilled].redecided);
+  EXPECT_GT(repaired.stats[spilled].pixels_removed, cv::countNonZero(spill) / 2);
+}
+
+// The photo is named when there is nothing to segment or it is burnt out.
+TEST(SilhouetteTest, EmptyAndOverExposedPhotosAreNamed) {
+  const sim::SimViews& capture = testing::SimulatedCapture("bottle");
+  const View& view = capture.views[0];
+  CAROUSEL_EXPECT_THROW_WITH(
+      ComputeSilhouette(capture.backgrounds[0], view.camera(), {}, {}, "empty.jpg"), FormatError,
+      "empty.jpg: no object found");
+  cv::Mat burnt;
+  view.Image().convertTo(burnt, CV_8UC3, 3.0);
+  CAROUSEL_EXPECT_THROW_WITH(ComputeSilhouette(burnt, view.camera(), {}, {}, "burnt.jpg"),
+                             FormatError, "burnt.jpg: over-exposed");
 }
 
 TEST(SilhouetteTest, RejectsBadInput) {

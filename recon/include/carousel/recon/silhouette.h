@@ -107,7 +107,8 @@ struct SilhouetteStats {
 
 // One photo's silhouette. `background` is the background plate (kDifference; same size,
 // CV_8UC3), ignored by kKey. `name` names the photo in errors. `prior` (optional, CV_8UC1,
-// photo-sized; OthersHullPriors): 0 = not object, 255 = probably object, 128 = undecided.
+// photo-sized; OthersHullPriors): 0 = not object, 255 = object, 192 = probably object,
+// 128 = the colours decide.
 // \throw InvalidArgument (image type, missing background, sizes), FormatError if the photo
 //        shows no backdrop to key against, no object, an object touching the frame's border
 //        (with check_border) or is over-exposed.

@@ -94,9 +94,10 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views, const VisualH
 // Multi-view consistency of silhouettes: per view, what the hull of all the OTHER views says
 // about each of its pixels, on a coarse grid (96 cells along the carved region). CV_8UC1 at
 // the mask's size: 0 = no cell of the others' hull projects there (grown by a cell: surely
-// not object), 255 = a cell wholly inside every other silhouette projects there (surely
-// object where the photo does not show the backdrop through a see-through hole), 128 =
-// undecided. Empty when a mask is empty. \pre masks[i] sized as views[i]'s camera.
+// not object), 192 = a cell wholly inside every other silhouette projects there (probably
+// object), 255 = that, and a cell's footprint from the outline of that region (object:
+// nothing see-through there escapes the neighbouring views), 128 = undecided. Empty when a
+// mask is empty. \pre masks[i] sized as views[i]'s camera.
 // \throw InvalidArgument (sizes), FormatError (inconsistent calibration).
 std::vector<cv::Mat> OthersHullPriors(const std::vector<View>& views,
                                       const std::vector<cv::Mat>& masks,
