@@ -17,12 +17,14 @@
 #include <string>
 #include <utility>
 
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "bench_flags.h"
 #include "carousel/core/image_io.h"
 #include "carousel/core/mesh_io.h"
 #include "carousel/core/mesh_query.h"
+#include "carousel/core/parallel.h"
 #include "carousel/core/progress.h"
 #include "carousel/core/timer.h"
 #include "carousel/recon/recon.h"
@@ -100,6 +102,20 @@ int main(int argc, char** argv) {
       if (update.fraction == 0.0 && !update.stage_done)
         std::fprintf(stderr, "[%7.2f s] %s\n", since_start.ElapsedSeconds(), update.stage.c_str());
     });
+    // The yardstick: decoding the same photos as JPEG files, in parallel as the silhouettes
+    // run (issue 20: silhouettes within 2x of it).
+    std::vector<std::vector<std::uint8_t>> jpegs(sim_views.views.size());
+    for (std::size_t i = 0; i < jpegs.size(); ++i)
+      cv::imencode(".jpg", sim_views.views[i].Image(), jpegs[i], {cv::IMWRITE_JPEG_QUALITY, 95});
+    Stopwatch decode_watch;
+    ParallelFor(jpegs.size(), 1, 0, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t i = begin; i < end; ++i) {
+        const cv::Mat decoded = cv::imdecode(jpegs[i], cv::IMREAD_COLOR);
+        if (decoded.empty()) std::abort();
+      }
+    });
+    const double decode_seconds = decode_watch.ElapsedSeconds();
+    jpegs.clear();
     Stopwatch stage;
     recon::SilhouetteOptions silhouette_options;
     silhouette_options.method = recon::ParseSilhouetteMethod(method);
@@ -135,6 +151,8 @@ int main(int argc, char** argv) {
                    small);
       }
     }
+    std::printf("decoding the %zu photos as JPEG: %.2f s; silhouettes %.2fx that\n",
+                sim_views.views.size(), decode_seconds, silhouette_seconds / decode_seconds);
     std::printf("silhouettes (%s): %.2f s; IoU min %.5f (%s), mean %.5f\n", method.c_str(),
                 silhouette_seconds, min_iou, worst_view.c_str(),
                 sum_iou / static_cast<double>(sim_views.views.size()));

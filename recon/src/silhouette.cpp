@@ -22,6 +22,8 @@ namespace {
 
 // Longest side of the thumbnail the backdrop and plate models are fitted on, pixels.
 constexpr int kFitSize = 320;
+// Longest side of the copy the candidates' pieces are found on, pixels.
+constexpr double kPieceSize = 1024.0;
 // Longest side of the region the graph cut segments, working pixels, and its iterations.
 constexpr int kGraphCutSize = 480;
 constexpr int kGraphCutIterations = 3;
@@ -224,22 +226,29 @@ class Classifier {
 double VisiblePlateEdge(const cv::Mat& image, const cv::Mat& plate, const cv::Mat& rim,
                         const ColourModel& backdrop, const ColourModel& plate_colour,
                         const Classifier& classifier) {
-  const cv::Mat ring_kernel = cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(7, 7));
+  // All within the rim band's box, grown by the rings.
+  constexpr int kRing = 3;
+  cv::Rect box = cv::boundingRect(rim);
+  if (box.area() == 0) return 0.0;
+  box = cv::Rect(box.x - kRing, box.y - kRing, box.width + 2 * kRing, box.height + 2 * kRing) &
+        cv::Rect(0, 0, image.cols, image.rows);
+  const cv::Mat rim_box = rim(box);
+  const cv::Mat plate_box = plate(box);
   cv::Mat near_rim;
-  cv::dilate(rim, near_rim, ring_kernel);
-  const cv::Mat inner = near_rim & plate & ~rim;
-  const cv::Mat outer = near_rim & ~plate & ~rim;
-  cv::Mat inner_ok = cv::Mat::zeros(image.size(), CV_8UC1);
-  cv::Mat outer_ok = cv::Mat::zeros(image.size(), CV_8UC1);
-  const cv::Rect box = cv::boundingRect(near_rim);
-  for (int y = box.y; y < box.br().y; ++y) {
-    const auto* in = image.ptr<cv::Vec3b>(y);
+  cv::dilate(rim_box, near_rim,
+             cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * kRing + 1, 2 * kRing + 1)));
+  const cv::Mat inner = near_rim & plate_box & ~rim_box;
+  const cv::Mat outer = near_rim & ~plate_box & ~rim_box;
+  cv::Mat inner_ok = cv::Mat::zeros(box.size(), CV_8UC1);
+  cv::Mat outer_ok = cv::Mat::zeros(box.size(), CV_8UC1);
+  for (int y = 0; y < box.height; ++y) {
+    const auto* in = image.ptr<cv::Vec3b>(y + box.y) + box.x;
     const auto* i_row = inner.ptr<std::uint8_t>(y);
     const auto* o_row = outer.ptr<std::uint8_t>(y);
-    const double ny = (y + 0.5) / image.rows * 2.0 - 1.0;
-    for (int x = box.x; x < box.br().x; ++x) {
+    const double ny = (y + box.y + 0.5) / image.rows * 2.0 - 1.0;
+    for (int x = 0; x < box.width; ++x) {
       if (!i_row[x] && !o_row[x]) continue;
-      const double nx = (x + 0.5) / image.cols * 2.0 - 1.0;
+      const double nx = (x + box.x + 0.5) / image.cols * 2.0 - 1.0;
       const cv::Vec3f c(in[x][0], in[x][1], in[x][2]);
       if (i_row[x] && classifier.IsBackground(c, plate_colour.At(nx, ny)))
         inner_ok.at<std::uint8_t>(y, x) = 255;
@@ -250,16 +259,17 @@ double VisiblePlateEdge(const cv::Mat& image, const cv::Mat& plate, const cv::Ma
   const double inner_total = cv::countNonZero(inner);
   if (inner_total == 0) return 0.0;
   // Across the rim band: its width is its area over the outline's length (the inner ring is
-  // 3 pixels wide).
-  const double band_width = cv::countNonZero(rim & near_rim) / (inner_total / 3.0);
-  const int reach = static_cast<int>(std::ceil(band_width)) + 4;
+  // kRing pixels wide). A square reach (separable, fast on 18-Mpx photos) is close enough.
+  const double band_width = cv::countNonZero(rim_box) / (inner_total / kRing);
+  const int reach = static_cast<int>(std::ceil(band_width)) + kRing + 1;
   cv::Mat outer_near;
   cv::dilate(outer_ok, outer_near,
-             cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * reach + 1, 2 * reach + 1)));
+             cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * reach + 1, 2 * reach + 1)));
   return cv::countNonZero(inner_ok & outer_near) / inner_total;
 }
 
-void RemoveSmallComponents(cv::Mat* fg, double min_fraction, int* kept) {
+// Returns the largest component's area, pixels.
+int RemoveSmallComponents(cv::Mat* fg, double min_fraction, int* kept) {
   cv::Mat labels, stats, centroids;
   const int n = cv::connectedComponentsWithStats(*fg, labels, stats, centroids, 8, CV_32S);
   int largest = 0;
@@ -278,6 +288,7 @@ void RemoveSmallComponents(cv::Mat* fg, double min_fraction, int* kept) {
     std::uint8_t* m = fg->ptr<std::uint8_t>(y);
     for (int x = 0; x < fg->cols; ++x) m[x] = keep[l[x]];
   }
+  return largest;
 }
 
 void FillSmallHoles(cv::Mat* fg, double max_area) {
@@ -380,16 +391,28 @@ class BorderResiduals {
 // binary mask (255 = object).
 cv::Mat SegmentByGraphCut(const cv::Mat& image, const cv::Mat& candidates,
                           const ExpectedBackground& expected, const SilhouetteOptions& options,
-                          const cv::Mat& prior, const std::string& name) {
+                          const cv::Mat& prior, const std::string& name, double* largest_piece) {
   const cv::Size full = image.size();
   // The region: the candidates' pieces that matter (and what the other views say is object),
   // with a margin.
-  cv::Mat pieces = candidates.clone();
+  // (Found on a copy of at most kPieceSize pixels: connected components of 18-Mpx photos are
+  // slow.)
+  const double coarse = std::min(1.0, kPieceSize / std::max(full.width, full.height));
+  cv::Mat pieces;
+  cv::resize(candidates, pieces, cv::Size(), coarse, coarse, cv::INTER_AREA);
+  pieces = pieces >= 128;
   int unused = 0;
-  RemoveSmallComponents(&pieces, 0.01, &unused);
-  if (!prior.empty()) pieces |= prior >= 192;
+  *largest_piece = RemoveSmallComponents(&pieces, 0.01, &unused) / (coarse * coarse);
+  if (!prior.empty()) {
+    cv::Mat small_prior;
+    cv::resize(prior, small_prior, pieces.size(), 0, 0, cv::INTER_NEAREST);
+    pieces |= small_prior >= 192;
+  }
   if (cv::countNonZero(pieces) == 0) return cv::Mat::zeros(full, CV_8UC1);
-  cv::Rect roi = cv::boundingRect(pieces);
+  const cv::Rect coarse_roi = cv::boundingRect(pieces);
+  cv::Rect roi(static_cast<int>(coarse_roi.x / coarse), static_cast<int>(coarse_roi.y / coarse),
+               static_cast<int>(std::ceil(coarse_roi.width / coarse)) + 1,
+               static_cast<int>(std::ceil(coarse_roi.height / coarse)) + 1);
   const int margin = std::max(8, std::max(roi.width, roi.height) / 10);
   roi = cv::Rect(roi.x - margin, roi.y - margin, roi.width + 2 * margin, roi.height + 2 * margin) &
         cv::Rect(cv::Point(0, 0), full);
@@ -861,16 +884,14 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
     if (have_plate && plate.at<std::uint8_t>(y, x)) return plate_colour.At(nx, ny);
     return backdrop.At(nx, ny);
   };
-  cv::Mat candidates = fg;
-  fg = SegmentByGraphCut(image, candidates, expected, options, prior, name);
+  double largest = 0.0;
+  fg = SegmentByGraphCut(image, fg, expected, options, prior, name, &largest);
   RemoveSmallComponents(&fg, options.min_component_fraction, &components);
   const double object_area = cv::countNonZero(fg);
   if (options.check_border && prior.empty()) {
     // Candidates that reach the border, whose colours the border band shows, were all taken
     // for backdrop: when that leaves almost nothing of them, the object itself crosses the
     // frame's border.
-    RemoveSmallComponents(&candidates, 0.5, &components);
-    const double largest = cv::countNonZero(candidates);
     if (largest > kMinObjectFraction * static_cast<double>(fg.total()) &&
         object_area < kMinKeptOfCandidates * largest) {
       std::ostringstream reason;
