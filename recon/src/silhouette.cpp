@@ -24,12 +24,14 @@ namespace {
 constexpr int kFitSize = 320;
 // Longest side of the copy the candidates' pieces are found on, pixels.
 constexpr double kPieceSize = 1024.0;
+// Pixels of the working copy everything but the boundary refinement runs on.
+constexpr double kWorkPixels = 1.0e6;
 // Longest side of the region the graph cut segments, working pixels, and its iterations.
 constexpr int kGraphCutSize = 480;
 constexpr int kGraphCutIterations = 3;
 // Multi-view consistency: with this many views or more; a view is re-decided when it has
-// more than this many hole pixels well inside the others' hull, or as many (and this fraction
-// of its silhouette) outside it.
+// more than this many hole pixels (at the priors' size, at most 1024 along the longest side)
+// well inside the others' hull, or as many (and this fraction of its silhouette) outside it.
 constexpr std::size_t kMinConsistencyViews = 4;
 constexpr double kMinDisagreementPx = 25.0;
 constexpr double kMinDisagreementFraction = 0.002;
@@ -514,12 +516,20 @@ cv::Mat SegmentByGraphCut(const cv::Mat& image, const cv::Mat& candidates,
   if (roi.br().y < full.height) labels.row(labels.rows - 1).setTo(cv::GC_BGD);
   if (object_seeds == 0 && cv::countNonZero(labels & 1) == 0) return cv::Mat::zeros(full, CV_8UC1);
   cv::Mat background_model, object_model;
+  // GrabCut's colour mixtures start from k-means on this thread's random generator: seeded, so
+  // that a photo's silhouette does not depend on which worker segmented it or what it did
+  // before.
+  cv::RNG& rng = cv::theRNG();
+  const std::uint64_t saved_state = rng.state;
+  rng.state = 0x2545F4914F6CDD1DULL;
   try {
     cv::grabCut(small, labels, cv::Rect(), background_model, object_model, kGraphCutIterations,
                 cv::GC_INIT_WITH_MASK);
   } catch (const cv::Exception& e) {
+    rng.state = saved_state;
     throw FormatError(name, std::string("silhouette segmentation failed: ") + e.what());
   }
+  rng.state = saved_state;
   cv::Mat object = (labels == cv::GC_FGD) | (labels == cv::GC_PR_FGD);
   cv::Mat result = cv::Mat::zeros(full, CV_8UC1);
   if (scale < 1.0) {
@@ -606,47 +616,78 @@ cv::Mat NearestColour(const cv::Mat& smooth, const cv::Mat& sure) {
 
 // Boundary refinement to an alpha matte: in a band around the outline, each pixel's coverage
 // alpha = <I - B, F - B> / |F - B|^2 with F and B the object's and the background's colours
-// nearest to it where each is sure (just beyond the band), 8-bit; elsewhere 0 or 255.
+// nearest to it where each is sure (just beyond the band), 8-bit; elsewhere 0 or 255. Done
+// tile by tile, only where the outline passes (a photo's object is mostly not outline); a
+// tile is processed with a margin that holds the band's reach and the sure colours beyond it,
+// and where a side has no sure pixel within it (a part thinner than the band) the binary
+// mask stays.
 void RefineToAlpha(const cv::Mat& image, const SilhouetteOptions& options, cv::Mat* fg) {
   // The band covers the graph cut's working-resolution step.
   const int band =
       1 +
       static_cast<int>(std::ceil(std::max(image.cols, image.rows) / (kGraphCutSize * 1.0) * 0.5));
-  cv::Rect roi = cv::boundingRect(*fg);
   const int pad = 2 * band + 2;
-  roi = cv::Rect(roi.x - pad, roi.y - pad, roi.width + 2 * pad, roi.height + 2 * pad) &
-        cv::Rect(0, 0, image.cols, image.rows);
-  const cv::Mat fg_roi = (*fg)(roi);
+  const cv::Rect frame(0, 0, image.cols, image.rows);
+  cv::Rect roi = cv::boundingRect(*fg);
+  if (roi.area() == 0) return;
+  roi = cv::Rect(roi.x - pad, roi.y - pad, roi.width + 2 * pad, roi.height + 2 * pad) & frame;
   const cv::Mat kernel =
       cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * band + 1, 2 * band + 1));
-  cv::Mat grown, shrunk;
-  cv::dilate(fg_roi, grown, kernel);
-  cv::erode(fg_roi, shrunk, kernel);
-  if (cv::countNonZero(shrunk) == 0) return;
-  cv::Mat colour, smooth;
-  image(roi).convertTo(colour, CV_32FC3);
-  cv::blur(colour, smooth, cv::Size(3, 3));
-  const cv::Mat object = NearestColour(smooth, shrunk);
-  const cv::Mat background = NearestColour(smooth, ~grown);
-  cv::Mat refined = fg_roi.clone();
   const double min_contrast = 2.0 * std::max(options.noise_threshold, 4.0);
-  for (int y = 0; y < roi.height; ++y) {
-    const auto* g = grown.ptr<std::uint8_t>(y);
-    const auto* s = shrunk.ptr<std::uint8_t>(y);
-    const auto* f_row = object.ptr<cv::Vec3f>(y);
-    const auto* b_row = background.ptr<cv::Vec3f>(y);
-    const auto* i_row = colour.ptr<cv::Vec3f>(y);
-    auto* out = refined.ptr<std::uint8_t>(y);
-    for (int x = 0; x < roi.width; ++x) {
-      if (!g[x] || s[x]) continue;
-      const cv::Vec3f fb = f_row[x] - b_row[x];
-      const double contrast_sq = fb.dot(fb);
-      if (contrast_sq < min_contrast * min_contrast) continue;
-      const double alpha = (i_row[x] - b_row[x]).dot(fb) / contrast_sq;
-      out[x] = cv::saturate_cast<std::uint8_t>(255.0 * std::clamp(alpha, 0.0, 1.0));
+  const cv::Mat binary = fg->clone();  // the tiles read the unrefined mask
+  constexpr int kTile = 64;
+  for (int ty = roi.y; ty < roi.br().y; ty += kTile) {
+    for (int tx = roi.x; tx < roi.br().x; tx += kTile) {
+      const cv::Rect core = cv::Rect(tx, ty, kTile, kTile) & roi;
+      // The outline passes when the core, grown by the band, holds both sides.
+      const cv::Rect reach =
+          cv::Rect(core.x - band, core.y - band, core.width + 2 * band, core.height + 2 * band) &
+          frame;
+      const int object_px = cv::countNonZero(binary(reach));
+      if (object_px == 0 || object_px == reach.area()) continue;
+      const int margin = pad + band;
+      const cv::Rect region = cv::Rect(core.x - margin, core.y - margin, core.width + 2 * margin,
+                                       core.height + 2 * margin) &
+                              frame;
+      const cv::Mat fg_region = binary(region);
+      cv::Mat grown, shrunk;
+      cv::dilate(fg_region, grown, kernel);
+      cv::erode(fg_region, shrunk, kernel);
+      // Within a band of the region's edge the morphology did not see all it needed: neither
+      // side is sure there.
+      if (region.width > 2 * band && region.height > 2 * band) {
+        cv::Mat edge(region.size(), CV_8UC1, cv::Scalar(255));
+        edge(cv::Rect(band, band, region.width - 2 * band, region.height - 2 * band))
+            .setTo(cv::Scalar(0));
+        shrunk.setTo(0, edge);
+        grown.setTo(255, edge);
+      }
+      if (cv::countNonZero(shrunk) == 0 || cv::countNonZero(grown) == region.area()) continue;
+      cv::Mat colour, smooth;
+      image(region).convertTo(colour, CV_32FC3);
+      cv::blur(colour, smooth, cv::Size(3, 3));
+      const cv::Mat object = NearestColour(smooth, shrunk);
+      const cv::Mat background = NearestColour(smooth, ~grown);
+      const cv::Point offset = core.tl() - region.tl();
+      for (int y = 0; y < core.height; ++y) {
+        const int ry = y + offset.y;
+        const auto* g = grown.ptr<std::uint8_t>(ry) + offset.x;
+        const auto* sh = shrunk.ptr<std::uint8_t>(ry) + offset.x;
+        const auto* f_row = object.ptr<cv::Vec3f>(ry) + offset.x;
+        const auto* b_row = background.ptr<cv::Vec3f>(ry) + offset.x;
+        const auto* i_row = colour.ptr<cv::Vec3f>(ry) + offset.x;
+        auto* out = fg->ptr<std::uint8_t>(core.y + y) + core.x;
+        for (int x = 0; x < core.width; ++x) {
+          if (!g[x] || sh[x]) continue;
+          const cv::Vec3f fb = f_row[x] - b_row[x];
+          const double contrast_sq = fb.dot(fb);
+          if (contrast_sq < min_contrast * min_contrast) continue;
+          const double alpha = (i_row[x] - b_row[x]).dot(fb) / contrast_sq;
+          out[x] = cv::saturate_cast<std::uint8_t>(255.0 * std::clamp(alpha, 0.0, 1.0));
+        }
+      }
     }
   }
-  refined.copyTo((*fg)(roi));
 }
 
 }  // namespace
@@ -742,33 +783,21 @@ void SilhouetteOptions::Validate() const {
   CAROUSEL_THROW_IF(threads < 0, InvalidArgument, "SilhouetteOptions.threads must be >= 0");
 }
 
-cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
-                          const SilhouetteOptions& options, const cv::Mat& background,
-                          const std::string& name, SilhouetteStats* stats, const cv::Mat& prior) {
-  options.Validate();
-  CAROUSEL_THROW_IF(!prior.empty() && (prior.type() != CV_8UC1 || prior.size() != image.size()),
-                    InvalidArgument, name << ": the silhouette prior must be 8-bit, photo-sized");
-  CAROUSEL_THROW_IF(image.empty() || image.type() != CV_8UC3, InvalidArgument,
-                    name << ": silhouettes need an 8-bit BGR photo");
-  CAROUSEL_THROW_IF(image.cols != camera.width || image.rows != camera.height, InvalidArgument,
-                    name << ": photo is " << image.cols << "x" << image.rows
-                         << " but its camera is " << camera.width << "x" << camera.height);
+namespace {
+
+// The silhouette of a photo at its working size (inputs checked by ComputeSilhouette; `image`,
+// `background` and `prior` all of `camera`'s size): binary (255 = object), before the boundary
+// refinement.
+cv::Mat SegmentAtWorkingSize(const cv::Mat& image, const CameraModel& camera,
+                             const SilhouetteOptions& options, double rim_px,
+                             const cv::Mat& background, const std::string& name,
+                             SilhouetteStats* stats, const cv::Mat& prior) {
   const bool difference = options.method == SilhouetteMethod::kDifference;
-  if (difference) {
-    CAROUSEL_THROW_IF(background.empty(), InvalidArgument,
-                      name << ": the difference method needs a background plate (a photo of "
-                              "the empty turntable by the same camera)");
-    CAROUSEL_THROW_IF(background.type() != CV_8UC3 || background.size() != image.size(),
-                      InvalidArgument,
-                      name << ": background plate is " << background.cols << "x" << background.rows
-                           << " and not an 8-bit BGR image like the photo (" << image.cols << "x"
-                           << image.rows << ")");
-  }
   const int width = image.cols;
   const int height = image.rows;
   cv::Mat plate, rim;
-  PlateRegions(camera, difference ? 0.0 : options.plate_radius_m, options.plate_rim_m,
-               options.plate_rim_px, &plate, &rim);
+  PlateRegions(camera, difference ? 0.0 : options.plate_radius_m, options.plate_rim_m, rim_px,
+               &plate, &rim);
 
   // --- the expected background colour per pixel ---------------------------------------------
   ColourModel backdrop;
@@ -909,13 +938,65 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
   FillSmallHoles(&fg, options.max_hole_fraction * object_area);
   if (options.check_border) CheckClearOfBorder(fg, name);
   CheckExposure(image, fg, name);
-  if (options.refine_boundary) RefineToAlpha(image, options, &fg);
-
   if (stats != nullptr) {
-    stats->object_fraction = cv::countNonZero(fg >= 128) / static_cast<double>(fg.total());
     stats->backdrop_residual = backdrop.rms;
     stats->components = components;
   }
+  return fg;
+}
+
+}  // namespace
+
+cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
+                          const SilhouetteOptions& options, const cv::Mat& background,
+                          const std::string& name, SilhouetteStats* stats, const cv::Mat& prior) {
+  options.Validate();
+  CAROUSEL_THROW_IF(!prior.empty() && prior.type() != CV_8UC1, InvalidArgument,
+                    name << ": the silhouette prior must be 8-bit");
+  CAROUSEL_THROW_IF(image.empty() || image.type() != CV_8UC3, InvalidArgument,
+                    name << ": silhouettes need an 8-bit BGR photo");
+  CAROUSEL_THROW_IF(image.cols != camera.width || image.rows != camera.height, InvalidArgument,
+                    name << ": photo is " << image.cols << "x" << image.rows
+                         << " but its camera is " << camera.width << "x" << camera.height);
+  const bool difference = options.method == SilhouetteMethod::kDifference;
+  if (difference) {
+    CAROUSEL_THROW_IF(background.empty(), InvalidArgument,
+                      name << ": the difference method needs a background plate (a photo of "
+                              "the empty turntable by the same camera)");
+    CAROUSEL_THROW_IF(background.type() != CV_8UC3 || background.size() != image.size(),
+                      InvalidArgument,
+                      name << ": background plate is " << background.cols << "x" << background.rows
+                           << " and not an 8-bit BGR image like the photo (" << image.cols << "x"
+                           << image.rows << ")");
+  }
+  // Everything but the boundary refinement runs on a working copy of at most kWorkPixels: the
+  // graph cut decides at a coarser size anyway, and the refinement, at full size, only in the
+  // band along the outline.
+  const double work_scale =
+      std::min(1.0, std::sqrt(kWorkPixels / static_cast<double>(image.total())));
+  cv::Mat fg;
+  if (work_scale < 1.0) {
+    const CameraModel work_camera = camera.Scaled(work_scale);
+    const cv::Size work_size(work_camera.width, work_camera.height);
+    cv::Mat work_image, work_background, work_prior;
+    cv::resize(image, work_image, work_size, 0, 0, cv::INTER_AREA);
+    if (difference) cv::resize(background, work_background, work_size, 0, 0, cv::INTER_AREA);
+    if (!prior.empty()) cv::resize(prior, work_prior, work_size, 0, 0, cv::INTER_NEAREST);
+    const cv::Mat work_fg =
+        SegmentAtWorkingSize(work_image, work_camera, options, options.plate_rim_px * work_scale,
+                             work_background, name, stats, work_prior);
+    cv::resize(work_fg, fg, image.size(), 0, 0, cv::INTER_LINEAR);
+    cv::threshold(fg, fg, 127, 255, cv::THRESH_BINARY);
+  } else {
+    cv::Mat full_prior = prior;
+    if (!prior.empty() && prior.size() != image.size())
+      cv::resize(prior, full_prior, image.size(), 0, 0, cv::INTER_NEAREST);
+    fg = SegmentAtWorkingSize(image, camera, options, options.plate_rim_px, background, name, stats,
+                              full_prior);
+  }
+  if (options.refine_boundary) RefineToAlpha(image, options, &fg);
+  if (stats != nullptr)
+    stats->object_fraction = cv::countNonZero(fg >= 128) / static_cast<double>(fg.total());
   return fg;
 }
 
@@ -960,48 +1041,56 @@ void MakeConsistent(const std::vector<View>& views, const std::vector<cv::Mat>& 
   std::vector<cv::Mat> priors = OthersHullPriors(views, result->masks, hull_options);
   if (priors.empty()) return;  // an empty silhouette: the hull names it
   // The views that disagree with the others' hull: object where no other view allows it, or
-  // backdrop where every other view says object.
+  // backdrop where every other view says object. Decided at the priors' size (the grid is
+  // coarse), in parallel.
+  std::vector<std::uint8_t> disagrees(views.size(), 0);
+  ParallelFor(views.size(), 1, options.threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t v = begin; v < end; ++v) {
+      cv::Mat object = result->masks[v];
+      if (object.size() != priors[v].size())
+        cv::resize(object, object, priors[v].size(), 0, 0, cv::INTER_AREA);
+      object = object >= 128;
+      // Deep inside the others' hull, only holes enclosed by the object are filled regardless
+      // of colour; backdrop open to the outside (under a sole's arch) is a concavity the
+      // others' hull may not have carved.
+      cv::Mat open_backdrop = ~object;
+      cv::Mat labels;
+      const int n = cv::connectedComponents(open_backdrop, labels, 4, CV_32S);
+      std::vector<std::uint8_t> touches(static_cast<std::size_t>(n), 0);
+      for (int x = 0; x < labels.cols; ++x) {
+        touches[static_cast<std::size_t>(labels.at<int>(0, x))] = 1;
+        touches[static_cast<std::size_t>(labels.at<int>(labels.rows - 1, x))] = 1;
+      }
+      for (int y = 0; y < labels.rows; ++y) {
+        touches[static_cast<std::size_t>(labels.at<int>(y, 0))] = 1;
+        touches[static_cast<std::size_t>(labels.at<int>(y, labels.cols - 1))] = 1;
+      }
+      touches[0] = 0;  // the object
+      for (int y = 0; y < labels.rows; ++y) {
+        const int* l = labels.ptr<int>(y);
+        std::uint8_t* o = open_backdrop.ptr<std::uint8_t>(y);
+        for (int x = 0; x < labels.cols; ++x)
+          o[x] = touches[static_cast<std::size_t>(l[x])] ? 255 : 0;
+      }
+      priors[v].setTo(192, (priors[v] == 255) & open_backdrop);
+      // Slivers along the outline do not count: the grid is coarse.
+      const cv::Mat sliver = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3));
+      cv::Mat spill_map, hole_map;
+      cv::erode(object & (priors[v] == 0), spill_map, sliver);
+      cv::erode(~object & ~open_backdrop & (priors[v] >= 192), hole_map, sliver);
+      const int spill = cv::countNonZero(spill_map);
+      const int hole = cv::countNonZero(hole_map);
+      result->stats[v].outside_others = spill;
+      result->stats[v].hole_in_others = hole;
+      const double area = cv::countNonZero(object);
+      // A hole carves a tunnel through the hull whatever its size; a spill is only carved.
+      disagrees[v] = hole > kMinDisagreementPx ||
+                     spill > std::max(kMinDisagreementPx, kMinDisagreementFraction * area);
+    }
+  });
   std::vector<std::size_t> disagreeing;
-  for (std::size_t v = 0; v < views.size(); ++v) {
-    const cv::Mat object = result->masks[v] >= 128;
-    // Deep inside the others' hull, only holes enclosed by the object are filled regardless of
-    // colour; backdrop open to the outside (under a sole's arch) is a concavity the others'
-    // hull may not have carved.
-    cv::Mat open_backdrop = ~object;
-    cv::Mat labels;
-    const int n = cv::connectedComponents(open_backdrop, labels, 4, CV_32S);
-    std::vector<std::uint8_t> touches(static_cast<std::size_t>(n), 0);
-    for (int x = 0; x < labels.cols; ++x) {
-      touches[static_cast<std::size_t>(labels.at<int>(0, x))] = 1;
-      touches[static_cast<std::size_t>(labels.at<int>(labels.rows - 1, x))] = 1;
-    }
-    for (int y = 0; y < labels.rows; ++y) {
-      touches[static_cast<std::size_t>(labels.at<int>(y, 0))] = 1;
-      touches[static_cast<std::size_t>(labels.at<int>(y, labels.cols - 1))] = 1;
-    }
-    touches[0] = 0;  // the object
-    for (int y = 0; y < labels.rows; ++y) {
-      const int* l = labels.ptr<int>(y);
-      std::uint8_t* o = open_backdrop.ptr<std::uint8_t>(y);
-      for (int x = 0; x < labels.cols; ++x)
-        o[x] = touches[static_cast<std::size_t>(l[x])] ? 255 : 0;
-    }
-    priors[v].setTo(192, (priors[v] == 255) & open_backdrop);
-    // Slivers along the outline do not count: the grid is coarse.
-    const cv::Mat sliver = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3));
-    cv::Mat spill_map, hole_map;
-    cv::erode(object & (priors[v] == 0), spill_map, sliver);
-    cv::erode(~object & ~open_backdrop & (priors[v] >= 192), hole_map, sliver);
-    const int spill = cv::countNonZero(spill_map);
-    const int hole = cv::countNonZero(hole_map);
-    result->stats[v].outside_others = spill;
-    result->stats[v].hole_in_others = hole;
-    const double area = cv::countNonZero(object);
-    // A hole carves a tunnel through the hull whatever its size; a spill is only carved.
-    if (hole > kMinDisagreementPx ||
-        spill > std::max(kMinDisagreementPx, kMinDisagreementFraction * area))
-      disagreeing.push_back(v);
-  }
+  for (std::size_t v = 0; v < views.size(); ++v)
+    if (disagrees[v]) disagreeing.push_back(v);
   if (disagreeing.empty()) return;
   progress.BeginStage("silhouettes: multi-view consistency");
   std::atomic<std::size_t> done{0};

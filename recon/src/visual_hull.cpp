@@ -179,14 +179,17 @@ class Carver {
     return std::isfinite(best) ? best : unseen;
   }
 
-  // Per view: +1 inside the silhouette, -1 outside, 0 off the photo.
-  int PointState(std::size_t v, const Eigen::Vector3d& x) const {
+  // Per view: +1 inside the silhouette, -1 outside, 0 off the photo. With a radius (metres),
+  // -1 only when the whole ball's footprint is outside (a part thinner than the ball is not
+  // missed between sample points).
+  int PointState(std::size_t v, const Eigen::Vector3d& x, double radius = 0.0) const {
     const ViewData& view = views_[v];
     const Eigen::Vector3d p = view.rotation * x + view.translation;
-    if (p.z() <= kNearM) return 0;
+    if (p.z() - radius <= kNearM) return 0;
     const Eigen::Vector2d pixel = view.camera->ProjectFromCam(p);
     if (!view.distance->InImage(pixel.x(), pixel.y())) return 0;
-    return view.distance->At(pixel.x(), pixel.y()) > 0.0 ? 1 : -1;
+    const double reach = radius > 0.0 ? view.focal_max * radius / (p.z() - radius) + 1.0 : 0.0;
+    return view.distance->At(pixel.x(), pixel.y()) > -reach ? 1 : -1;
   }
 
  private:
@@ -817,12 +820,14 @@ std::vector<cv::Mat> OthersHullPriors(const std::vector<View>& views,
   for (std::size_t v = 0; v < n; ++v)
     if (!data[v].distance) return {};  // an empty silhouette: the hull names it
   const Eigen::AlignedBox3d carved = CarvingRegion(views, data, options);
-  // The grid spans the others' hull's box (points inside every silhouette on a coarser grid,
-  // grown by a coarse step), not the whole carved region: finer cells for the same count.
+  // The grid spans the others' hull's box (coarse cells that may be inside every silhouette
+  // but one, grown by a coarse step), not the whole carved region: finer cells for the same
+  // count.
   Eigen::AlignedBox3d region;
   {
     const Carver carver(data);
     const Eigen::Vector3d coarse = carved.sizes() / kConsistencyGrid;
+    const double reach = 0.5 * coarse.norm();  // a coarse cell's circumscribed radius
     std::mutex merge;
     ParallelFor(static_cast<std::size_t>(kConsistencyGrid), 1, threads,
                 [&](std::size_t begin, std::size_t end) {
@@ -835,7 +840,7 @@ std::vector<cv::Mat> OthersHullPriors(const std::vector<View>& views,
                                                i + 0.5, j + 0.5, static_cast<double>(k) + 0.5));
                         int outside = 0;
                         for (std::size_t v = 0; v < n && outside < 2; ++v)
-                          outside += carver.PointState(v, x) < 0 ? 1 : 0;
+                          outside += carver.PointState(v, x, reach) < 0 ? 1 : 0;
                         if (outside < 2) local.extend(x);  // in the hull of all but one view
                       }
                   std::lock_guard<std::mutex> lock(merge);
@@ -928,11 +933,6 @@ std::vector<cv::Mat> OthersHullPriors(const std::vector<View>& views,
       prior.setTo(0, may == 0);
       prior.setTo(192, is);
       prior.setTo(255, deep);
-      if (scales[v] < 1.0) {
-        cv::Mat full;
-        cv::resize(prior, full, masks[v].size(), 0, 0, cv::INTER_NEAREST);
-        prior = full;
-      }
       priors[v] = prior;
     }
   });

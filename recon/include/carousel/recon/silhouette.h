@@ -96,8 +96,8 @@ struct SilhouetteStats {
   double backdrop_residual = 0.0;  // RMS of the fitted backdrop model on its inliers, levels
   int components = 0;              // object components kept
   // Multi-view consistency: pixels of the first segmentation outside the other views' hull,
-  // and backdrop pixels well inside it; whether the view was segmented again, and what that
-  // changed.
+  // and backdrop pixels well inside it (both at the priors' size: at most 1024 along the
+  // longest side); whether the view was segmented again, and what that changed (photo pixels).
   int outside_others = 0;
   int hole_in_others = 0;
   bool redecided = false;
@@ -107,9 +107,9 @@ struct SilhouetteStats {
 
 // One photo's silhouette. `background` is the background plate (kDifference; same size,
 // CV_8UC3), ignored by kKey. `name` names the photo in errors. `prior` (optional, CV_8UC1,
-// photo-sized; OthersHullPriors): 0 = not object, 255 = object, 192 = probably object,
-// 128 = the colours decide.
-// \throw InvalidArgument (image type, missing background, sizes), FormatError if the photo
+// the photo's size or a smaller one of its aspect, resized nearest; OthersHullPriors): 0 = not
+// object, 255 = object, 192 = probably object, 128 = the colours decide. \throw InvalidArgument
+// (image type, missing background, sizes), FormatError if the photo
 //        shows no backdrop to key against, no object, an object touching the frame's border
 //        (with check_border) or is over-exposed.
 cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,

@@ -93,7 +93,8 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views, const VisualH
 
 // Multi-view consistency of silhouettes: per view, what the hull of all the OTHER views says
 // about each of its pixels, on a coarse grid (96 cells along the carved region). CV_8UC1 at
-// the mask's size: 0 = no cell of the others' hull projects there (grown by a cell: surely
+// the mask's size, or for a mask longer than 1024 pixels at that size (the camera scaled by
+// CameraModel::Scaled): 0 = no cell of the others' hull projects there (grown by a cell: surely
 // not object), 192 = a cell wholly inside every other silhouette projects there (probably
 // object), 255 = that, and a cell's footprint from the outline of that region (object:
 // nothing see-through there escapes the neighbouring views), 128 = undecided. Empty when a
