@@ -35,6 +35,8 @@ constexpr int kGraphCutIterations = 3;
 constexpr std::size_t kMinConsistencyViews = 4;
 constexpr double kMinDisagreementPx = 25.0;
 constexpr double kMinDisagreementFraction = 0.002;
+// A view disagreeing over more than this fraction of its silhouette is not repaired.
+constexpr double kMaxRepairFraction = 0.25;
 // A segmentation that keeps less than this fraction of the largest candidate piece means the
 // border band showed the object's colours.
 constexpr double kMinKeptOfCandidates = 0.1;
@@ -1083,9 +1085,19 @@ void MakeConsistent(const std::vector<View>& views, const std::vector<cv::Mat>& 
       result->stats[v].outside_others = spill;
       result->stats[v].hole_in_others = hole;
       const double area = cv::countNonZero(object);
-      // A hole carves a tunnel through the hull whatever its size; a spill is only carved.
-      disagrees[v] = hole > kMinDisagreementPx ||
-                     spill > std::max(kMinDisagreementPx, kMinDisagreementFraction * area);
+      // A hole carves a tunnel through the hull whatever its size; a spill is only carved. A
+      // view that disagrees about much of its object is not a segmentation slip but a wrong
+      // pose or photo: made to agree, it would hide that; the hull names it instead.
+      const bool slip = hole > kMinDisagreementPx ||
+                        spill > std::max(kMinDisagreementPx, kMinDisagreementFraction * area);
+      if (slip && hole + spill > kMaxRepairFraction * area) {
+        CAROUSEL_LOG_WARN(views[v].name()
+                          << ": the silhouette disagrees with the other views' hull over "
+                          << cvRound(100.0 * (hole + spill) / std::max(1.0, area))
+                          << "% of its area: not repaired (a wrong camera pose or photo?)");
+        continue;
+      }
+      disagrees[v] = slip;
     }
   });
   std::vector<std::size_t> disagreeing;

@@ -652,7 +652,7 @@ VisualHullResult ComputeVisualHull(const std::vector<View>& views, const VisualH
               << static_cast<int>(std::round(100.0 * result.view_consistency[v]))
               << "% of the others' hull)";
     }
-    throw FormatError(MasksLocation(views), message.str());
+    throw InconsistentViews(MasksLocation(views), message.str(), inconsistent);
   }
   // Grow by a coarse cell (points are cell centres) and clamp to the region.
   object_box.min() -= coarse_step;

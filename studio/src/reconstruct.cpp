@@ -1,6 +1,11 @@
 #include "carousel/studio/reconstruct.h"
 
+#include <algorithm>
 #include <map>
+#include <numeric>
+#include <sstream>
+
+#include <opencv2/imgproc.hpp>
 
 #include "carousel/core/error.h"
 #include "carousel/core/image_io.h"
@@ -8,6 +13,7 @@
 #include "carousel/core/mesh_io.h"
 #include "carousel/core/parallel.h"
 #include "carousel/core/timer.h"
+#include "carousel/recon/reprojection.h"
 #include "carousel/studio/session.h"
 
 namespace carousel::studio {
@@ -38,6 +44,79 @@ std::vector<cv::Mat> LoadBackgrounds(const std::filesystem::path& folder, const 
     backgrounds.push_back(it->second);
   }
   return backgrounds;
+}
+
+// A hull that broke into more pieces than this (or lost a quarter of its faces to small
+// pieces) is broken: mesh optimization would grind on it.
+constexpr std::size_t kMaxHullPieces = 100;
+constexpr double kMaxDroppedFaceFraction = 0.25;
+// The optimized mesh reproduces every silhouette at least this well, or a view is at fault.
+constexpr double kMinAgreementIoU = 0.8;
+// Longest side of a diagnostic overlay, pixels.
+constexpr int kDiagnosticSize = 1600;
+
+constexpr const char* kDiagnosticsFolder = "recon/diagnostics";
+
+// Per named view, recon/diagnostics/<photo>.jpg: the photo with its silhouette's outline (red)
+// and, when there is one, the hull's (green), at most kDiagnosticSize pixels along its longest
+// side. Earlier overlays are removed first (they would describe another run). Returns the
+// folder, relative to the session.
+std::string WriteDiagnostics(const std::filesystem::path& folder, const std::vector<View>& views,
+                             const std::vector<cv::Mat>& masks,
+                             const std::vector<std::size_t>& which, const Mesh* hull) {
+  const std::filesystem::path out = folder / kDiagnosticsFolder;
+  std::filesystem::remove_all(out);
+  std::filesystem::create_directories(out);
+  for (const std::size_t v : which) {
+    const View& view = views[v];
+    cv::Mat photo = view.Image();
+    const double scale =
+        std::min(1.0, static_cast<double>(kDiagnosticSize) / std::max(photo.cols, photo.rows));
+    auto outline = [&](const cv::Mat& mask) {
+      cv::Mat small = mask;
+      if (scale < 1.0) cv::resize(mask, small, cv::Size(), scale, scale, cv::INTER_AREA);
+      std::vector<std::vector<cv::Point>> contours;
+      cv::findContours(small >= 128, contours, cv::RETR_LIST, cv::CHAIN_APPROX_SIMPLE);
+      return contours;
+    };
+    cv::Mat overlay;
+    if (scale < 1.0)
+      cv::resize(photo, overlay, cv::Size(), scale, scale, cv::INTER_AREA);
+    else
+      overlay = photo.clone();
+    view.ReleasePixels();
+    if (hull != nullptr && hull->n_faces() > 0)
+      cv::drawContours(overlay, outline(recon::RasterizeSilhouette(*hull, view.camera())), -1,
+                       cv::Scalar(0, 200, 0), 2, cv::LINE_AA);
+    cv::drawContours(overlay, outline(masks[v]), -1, cv::Scalar(0, 0, 255), 2, cv::LINE_AA);
+    WriteImage(out / (std::filesystem::path(view.name()).stem().string() + ".jpg"), overlay);
+  }
+  return kDiagnosticsFolder;
+}
+
+// The views by how little of the others' hull they keep, those below `below` (at least
+// `at_least` of them): the ones that carve the hull apart.
+std::vector<std::size_t> CarvingViews(const std::vector<double>& consistency, double below,
+                                      std::size_t at_least) {
+  std::vector<std::size_t> order(consistency.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::sort(order.begin(), order.end(),
+            [&](std::size_t a, std::size_t b) { return consistency[a] < consistency[b]; });
+  std::size_t n = 0;
+  while (n < order.size() && (n < at_least || consistency[order[n]] < below)) ++n;
+  order.resize(n);
+  return order;
+}
+
+std::string ViewList(const std::vector<View>& views, const std::vector<std::size_t>& which,
+                     const std::vector<double>& consistency) {
+  std::ostringstream list;
+  for (std::size_t i = 0; i < which.size(); ++i) {
+    list << (i ? ", " : "") << views[which[i]].name();
+    if (which[i] < consistency.size())
+      list << " (keeps " << cvRound(100.0 * consistency[which[i]]) << "% of the others' hull)";
+  }
+  return list.str();
 }
 
 }  // namespace
@@ -110,9 +189,35 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
   }
   result.seconds_silhouettes = watch.ElapsedSeconds();
 
-  // Visual hull -> recon/hull.ply.
+  // Visual hull -> recon/hull.ply. A broken hull stops here, with the views that carve it
+  // apart named and their overlays in recon/diagnostics/ (the masks stay for inspection).
   watch.Restart();
-  const recon::VisualHullResult hull = recon::ComputeVisualHull(views, options.hull, progress);
+  std::filesystem::remove_all(session_folder / kDiagnosticsFolder);
+  recon::VisualHullResult hull;
+  try {
+    hull = recon::ComputeVisualHull(views, options.hull, progress);
+  } catch (const recon::InconsistentViews& e) {
+    const std::string where =
+        WriteDiagnostics(session_folder, views, silhouettes.masks, e.views(), nullptr);
+    throw FormatError(e.path(), e.reason() + "; each view's mask outline on its photo: " + where);
+  }
+  const std::size_t kept_faces = hull.mesh.n_faces();
+  if (hull.components_dropped > kMaxHullPieces ||
+      static_cast<double>(hull.faces_dropped) >
+          kMaxDroppedFaceFraction * static_cast<double>(kept_faces + hull.faces_dropped)) {
+    const std::vector<std::size_t> culprits = CarvingViews(hull.view_consistency, 0.9, 3);
+    const std::string where =
+        WriteDiagnostics(session_folder, views, silhouettes.masks, culprits, &hull.mesh);
+    std::ostringstream reason;
+    reason << "the visual hull breaks apart: " << hull.components_dropped
+           << " pieces beside the largest (" << hull.faces_dropped << " of "
+           << kept_faces + hull.faces_dropped
+           << " faces), so the silhouettes or the calibration are wrong; the views that carve "
+              "it most: "
+           << ViewList(views, culprits, hull.view_consistency)
+           << "; each view's mask (red) and the hull (green) on its photo: " << where;
+    throw FormatError(session_folder / "masks", reason.str());
+  }
   std::filesystem::create_directories(session_folder / "recon");
   WriteMesh(hull.mesh, session_folder / "recon/hull.ply");
   result.hull_faces = hull.mesh.n_faces();
@@ -133,6 +238,32 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
   watch.Restart();
   result.agreement = recon::MeasureSilhouetteAgreement(mesh.mesh, views, options.hull.threads);
   result.seconds_agreement = watch.ElapsedSeconds();
+  {
+    std::vector<std::size_t> disagreeing;
+    for (std::size_t v = 0; v < result.agreement.size(); ++v)
+      if (result.agreement[v].iou < kMinAgreementIoU) disagreeing.push_back(v);
+    if (!disagreeing.empty()) {
+      // The views that disagree, and those that carve the others' hull (a bad view carves the
+      // object from the others, which then disagree).
+      std::vector<std::size_t> named = CarvingViews(hull.view_consistency, 0.9, 1);
+      for (const std::size_t v : disagreeing)
+        if (std::find(named.begin(), named.end(), v) == named.end()) named.push_back(v);
+      const std::string where =
+          WriteDiagnostics(session_folder, views, silhouettes.masks, named, &mesh.mesh);
+      std::ostringstream reason;
+      reason << "the mesh does not reproduce " << disagreeing.size() << " view(s)' silhouettes"
+             << " (IoU below " << kMinAgreementIoU << "):";
+      for (std::size_t i = 0; i < disagreeing.size(); ++i)
+        reason << (i ? ", " : " ") << views[disagreeing[i]].name() << " ("
+               << cvRound(100.0 * result.agreement[disagreeing[i]].iou) << "%)";
+      reason << "; the view that carves the others' hull most: "
+             << ViewList(views, {named.front()}, hull.view_consistency)
+             << "; wrong masks or calibration; each view's mask (red) and the mesh (green) on "
+                "its photo: "
+             << where;
+      throw FormatError(session_folder / "masks", reason.str());
+    }
+  }
 
   session.stages["reconstruct"] = "done";
   session.stage_seconds["reconstruct/silhouettes"] = result.seconds_silhouettes;

@@ -2,8 +2,13 @@
 
 #include <gtest/gtest.h>
 
+#include <string>
+
+#include "carousel/core/error.h"
+#include "carousel/core/image_io.h"
 #include "carousel/core/progress.h"
 #include "carousel/studio/import.h"
+#include "carousel/studio/session.h"
 #include "carousel/testing/testing.h"
 
 namespace carousel::studio {
@@ -30,6 +35,50 @@ TEST(ReconstructTest, TheTempleRingOnBlackClothMatchesItsSilhouettes) {
   // The masks hold the temple alone: about a fifth of the frame, not the cloth beside it.
   EXPECT_LT(result.min_mask_fraction, 0.3);
   EXPECT_GT(result.min_mask_fraction, 0.1);
+}
+
+// A view whose pose is wrong carves the others' hull apart: the reconstruction stops naming
+// it, with its mask's outline drawn on its photo in recon/diagnostics/, and the masks are
+// kept. (Without the multi-view step, which re-segments views against the others' hull: with
+// a wrong pose among them, it names a view by what that does to its silhouette instead.)
+TEST(ReconstructTest, AViewWithAWrongPoseIsNamedWithAnOverlayOfItsMask) {
+  testing::TempDir dir;
+  Progress progress;
+  const auto folder = dir / "temple";
+  ImportDataset({.source = testing::SharedDataFile("middlebury/templeSparseRing/templeSR_par.txt")},
+                folder, progress);
+  Session session = ReadSession(folder);
+  ASSERT_GT(session.views.size(), 5u);
+  const SessionView& bad = session.views[5];
+  Rigid3d& pose = session.views[5].camera_model.cam_from_world;
+  pose.translation.x() += 0.3 * pose.translation.norm();
+  WriteSessionManifest(folder, session);
+  const std::string stem = std::filesystem::path(bad.image).stem().string();
+  ReconstructOptions options;
+  options.silhouettes.multi_view = false;
+  try {
+    ReconstructSession(folder, options, progress);
+    FAIL() << "a view with a wrong pose was not named";
+  } catch (const FormatError& e) {
+    const std::string message = e.what();
+    EXPECT_NE(message.find(std::filesystem::path(bad.image).filename().string()), std::string::npos)
+        << message;
+    EXPECT_NE(message.find("recon/diagnostics"), std::string::npos) << message;
+  }
+  const auto overlay = folder / "recon/diagnostics" / (stem + ".jpg");
+  ASSERT_TRUE(std::filesystem::is_regular_file(overlay));
+  const cv::Mat image = ReadImage(overlay);
+  EXPECT_EQ(image.cols, bad.camera_model.width);
+  int red = 0;
+  for (int y = 0; y < image.rows; ++y)
+    for (int x = 0; x < image.cols; ++x) {
+      const cv::Vec3b& c = image.at<cv::Vec3b>(y, x);
+      if (c[2] > 180 && c[1] < 80 && c[0] < 80) ++red;
+    }
+  EXPECT_GT(red, 200);  // the outline of a fifth of the frame
+  EXPECT_TRUE(std::filesystem::is_regular_file(folder / "masks" / (stem + ".png")));
+  const Session after = ReadSession(folder);
+  EXPECT_FALSE(after.stages.count("reconstruct") && after.stages.at("reconstruct") == "done");
 }
 
 }  // namespace

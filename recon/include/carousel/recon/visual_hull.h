@@ -17,12 +17,15 @@
 #pragma once
 
 #include <cstddef>
+#include <filesystem>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Geometry>
 #include <opencv2/core.hpp>
 
+#include "carousel/core/error.h"
 #include "carousel/core/mesh.h"
 #include "carousel/core/options.h"
 #include "carousel/core/progress.h"
@@ -84,10 +87,25 @@ struct VisualHullResult {
   double seconds_surface = 0.0;
 };
 
+// The silhouettes carve no common volume, or some views keep too little of the others' hull:
+// a FormatError naming the masks' folder and those views (wrong camera pose or mask), with
+// their indices for a diagnosis.
+class InconsistentViews : public FormatError {
+ public:
+  InconsistentViews(const std::filesystem::path& path, const std::string& reason,
+                    std::vector<std::size_t> views)
+      : FormatError(path, reason), views_(std::move(views)) {}
+  const std::vector<std::size_t>& views() const { return views_; }
+
+ private:
+  std::vector<std::size_t> views_;
+};
+
 // \pre views carry masks (View::Mask()) and cameras in one world frame.
 // \throw InvalidArgument (fewer than 2 views, bad options, a mask of the wrong size),
-//        FormatError naming views whose silhouettes are empty or inconsistent with the others
-//        (the hull vanishes), IoError for unreadable masks, Cancelled.
+//        FormatError naming views whose silhouettes are empty, InconsistentViews (the hull
+//        vanishes, or views inconsistent with the others), IoError for unreadable masks,
+//        Cancelled.
 VisualHullResult ComputeVisualHull(const std::vector<View>& views, const VisualHullOptions& options,
                                    Progress& progress);
 
