@@ -118,6 +118,7 @@ struct ScreenTriangle {
   float inv_z[3];        // 1 / camera z
   float u_z[3], v_z[3];  // uv / z
   float n_z[3][3];       // normal / z
+  float cam[3][3];       // camera-frame position (for the view direction of highlights)
   double area2;          // twice the signed screen area (> 0 after orientation)
   int material;          // index into the scene's materials, or -1 for the plate
   float lod;             // mip level
@@ -206,6 +207,7 @@ class TriangleSetup {
       t.u_z[k] = s.uv.x() * inv_z;
       t.v_z[k] = s.uv.y() * inv_z;
       for (int c = 0; c < 3; ++c) t.n_z[k][c] = s.normal[c] * inv_z;
+      for (int c = 0; c < 3; ++c) t.cam[k][c] = static_cast<float>(s.cam[c]);
     }
     t.area2 = area2;
     t.material = material;
@@ -284,7 +286,8 @@ class Rasteriser {
         lights_world_(lights_world),
         result_(result),
         n_(options.samples_per_axis),
-        samples_(n_ * n_) {
+        samples_(n_ * n_),
+        world_from_cam_(camera.cam_from_world.rotation.transpose().cast<float>()) {
     for (int j = 0; j < n_; ++j) {
       for (int i = 0; i < n_; ++i) {
         offsets_.emplace_back((i + 0.5) / n_ - 0.5, (j + 0.5) / n_ - 0.5);
@@ -406,20 +409,25 @@ class Rasteriser {
     // b are perspective-correct: attributes linear in 3D (uv, normal, z) combine with them.
     float z_interpolated = 0, u = 0, v = 0;
     Eigen::Vector3f n = Eigen::Vector3f::Zero();
+    Eigen::Vector3f position = Eigen::Vector3f::Zero();  // camera frame
     for (int k = 0; k < 3; ++k) {
       const float z = 1.0f / t.inv_z[k];
       u += b[k] * t.u_z[k] * z;
       v += b[k] * t.v_z[k] * z;
       for (int c = 0; c < 3; ++c) n[c] += b[k] * t.n_z[k][c] * z;
+      for (int c = 0; c < 3; ++c) position[c] += b[k] * t.cam[k][c];
       z_interpolated += b[k] * z;
     }
     *depth = z_interpolated;
     Eigen::Vector3f albedo;
+    float specular = 0.0f, shininess = 1.0f;
     if (t.material < 0) {
       albedo = plate_;
     } else {
       const Material& material = scene_.materials[t.material];
       albedo = material.base_color;
+      specular = material.specular;
+      shininess = material.shininess;
       if (material.texture >= 0) {
         albedo = albedo.cwiseProduct(SampleTexture(*scene_.textures[material.texture],
                                                    u - std::floor(u), v - std::floor(v), t.lod));
@@ -436,7 +444,23 @@ class Rasteriser {
       const float d = (n.dot(lights_world_[i]) + wrap) / (1.0f + wrap);
       light += static_cast<float>(options_.lights[i].intensity) * std::max(d, 0.0f);
     }
-    return albedo * (light * exposure);
+    Eigen::Vector3f colour = albedo * (light * exposure);
+    if (specular > 0.0f) {
+      // Blinn-Phong highlights of the studio lights, white (a dielectric's).
+      const float distance = position.norm();
+      const Eigen::Vector3f to_eye = distance > 0
+                                         ? Eigen::Vector3f(world_from_cam_ * (-position / distance))
+                                         : Eigen::Vector3f::UnitZ();
+      float highlight = 0.0f;
+      for (std::size_t i = 0; i < lights_world_.size(); ++i) {
+        if (n.dot(lights_world_[i]) <= 0.0f) continue;
+        const Eigen::Vector3f half = (lights_world_[i] + to_eye).normalized();
+        highlight += static_cast<float>(options_.lights[i].intensity) *
+                     std::pow(std::max(n.dot(half), 0.0f), shininess);
+      }
+      colour += Eigen::Vector3f::Constant(specular * highlight * exposure);
+    }
+    return colour;
   }
 
   // Writes a pixel's final colour (linear RGB) with sensor noise, as 8-bit BGR.
@@ -535,6 +559,7 @@ class Rasteriser {
   RenderResult& result_;
   int n_;
   int samples_;
+  Eigen::Matrix3f world_from_cam_;
   std::vector<Eigen::Vector2d> offsets_;
   std::vector<Eigen::Vector3f> backdrop_rows_;  // linear RGB per image row
   Eigen::Vector3f plate_;

@@ -752,4 +752,47 @@ Placement PlaceOnTurntable(Scene& scene, const PlacementOptions& options) {
   return placement;
 }
 
+MaterialOverride ParseMaterialOverride(const std::string& name) {
+  if (name == "none") return MaterialOverride::kNone;
+  if (name == "white") return MaterialOverride::kWhite;
+  if (name == "black") return MaterialOverride::kBlack;
+  if (name == "glossy") return MaterialOverride::kGlossy;
+  throw InvalidArgument("unknown material '" + name + "' (expected none, white, black or glossy)");
+}
+
+const char* MaterialOverrideName(MaterialOverride material) {
+  switch (material) {
+    case MaterialOverride::kWhite:
+      return "white";
+    case MaterialOverride::kBlack:
+      return "black";
+    case MaterialOverride::kGlossy:
+      return "glossy";
+    case MaterialOverride::kNone:
+      break;
+  }
+  return "none";
+}
+
+void Scene::OverrideMaterials(MaterialOverride material) {
+  for (Material& m : materials) {
+    switch (material) {
+      case MaterialOverride::kWhite:
+        m.base_color = Eigen::Vector3f::Constant(0.9f);
+        m.texture = -1;
+        break;
+      case MaterialOverride::kBlack:
+        m.base_color = Eigen::Vector3f::Constant(0.03f);
+        m.texture = -1;
+        break;
+      case MaterialOverride::kGlossy:
+        m.specular = 0.8f;
+        m.shininess = 80.0f;
+        break;
+      case MaterialOverride::kNone:
+        break;
+    }
+  }
+}
+
 }  // namespace carousel::sim

@@ -66,8 +66,9 @@ Eigen::Vector3d ParseBackdropColour(const std::string& text, const std::string& 
 
 const std::vector<std::string>& RunSimFieldNames() {
   static const std::vector<std::string> names = {
-      "scene", "data", "views",        "size",          "elevations", "focal-mm", "distance",
-      "noise", "seed", "jpeg-quality", "target-height", "scale",      "yaw-deg"};
+      "scene",         "data",     "views",   "size",     "elevations",
+      "focal-mm",      "distance", "noise",   "seed",     "jpeg-quality",
+      "target-height", "scale",    "yaw-deg", "material", "exposure"};
   return names;
 }
 
@@ -126,6 +127,21 @@ const OptionTable<SimCaptureOptions>& SimCaptureOptions::Fields() {
           o.render.backdrop_top = colour;
           o.render.backdrop_bottom = 0.9 * colour;
         });
+    t.Add({.name = "exposure",
+           .help = "exposure: a linear gain on the object and the plate (the backdrop is lit on "
+                   "its own)",
+           .min = 0,
+           .max = 16,
+           .min_exclusive = true},
+          [](O& o) -> OptionRef { return &o.render.exposure; });
+    t.AddChoice(&O::material,
+                {.name = "material",
+                 .help = "every material of the model made white, black or glossy (what studios "
+                         "find hard)"},
+                {{"none", sim::MaterialOverride::kNone},
+                 {"white", sim::MaterialOverride::kWhite},
+                 {"black", sim::MaterialOverride::kBlack},
+                 {"glossy", sim::MaterialOverride::kGlossy}});
     t.Add({.name = "plate-radius",
            .help = "turntable plate radius",
            .unit = "m",
@@ -204,6 +220,7 @@ SimCaptureResult SimulateCapture(const SimCaptureOptions& options,
   progress.BeginStage("load scene");
   const std::filesystem::path scene_path = ResolveScene(options.scene, options.data_dir);
   sim::Scene scene = sim::LoadScene(scene_path);
+  scene.OverrideMaterials(options.material);
   const sim::Placement placement = sim::PlaceOnTurntable(scene, options.placement);
   const std::vector<CameraModel> rig = sim::MakeSimRig(options.rig, scene.Bounds());
   progress.EndStage();

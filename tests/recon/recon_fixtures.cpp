@@ -2,6 +2,8 @@
 
 #include <map>
 #include <mutex>
+#include <string>
+#include <vector>
 
 #include "carousel/sim/test_scenes.h"
 #include "carousel/testing/testing.h"
@@ -13,22 +15,35 @@ const sim::SimViews& SimulatedCapture(const std::string& name) {
   static std::map<std::string, sim::SimViews> cache;
   std::lock_guard<std::mutex> lock(mutex);
   if (const auto it = cache.find(name); it != cache.end()) return it->second;
+  // "scene/material[/backdrop]": the scene with its materials overridden (white, black,
+  // glossy), on a backdrop of its own (grey, black).
+  std::vector<std::string> parts;
+  for (std::size_t begin = 0;;) {
+    const std::size_t slash = name.find('/', begin);
+    parts.push_back(name.substr(begin, slash - begin));
+    if (slash == std::string::npos) break;
+    begin = slash + 1;
+  }
+  const std::string& base = parts[0];
+  const std::string material = parts.size() > 1 ? parts[1] : "none";
+  const std::string backdrop =
+      parts.size() > 2 ? parts[2] : (material == "black" ? "black" : "light");
   sim::Scene scene;
   constexpr double kSize = 0.25;
   int stops = 16;
   int width = 960;
   int height = 640;
-  if (name == "ring") {
+  if (base == "ring") {
     scene = sim::MakeRingScene(0.4 * kSize, 0.1 * kSize);
-  } else if (name == "sphere") {
+  } else if (base == "sphere") {
     scene = sim::MakeSphereScene(0.5 * kSize, {0.0, 0.0, 0.5 * kSize}, 5);
-  } else if (name == "duck") {
+  } else if (base == "duck") {
     // Wider than the plate, which it hides; an eye's white as light as the backdrop.
     scene = sim::LoadScene(carousel::testing::SharedDataFile("models/Duck/glTF/Duck.gltf"));
     sim::PlaceOnTurntable(scene, {.target_height_m = 0.45});
     stops = 12;
   } else {
-    const std::string file = name == "shoe"
+    const std::string file = base == "shoe"
                                  ? "models/MaterialsVariantsShoe/glTF/MaterialsVariantsShoe.gltf"
                                  : "models/WaterBottle/glTF/WaterBottle.gltf";
     scene = sim::LoadScene(carousel::testing::SharedDataFile(file));
@@ -39,7 +54,20 @@ const sim::SimViews& SimulatedCapture(const std::string& name) {
     width = 1296;
     height = 864;
   }
+  scene.OverrideMaterials(sim::ParseMaterialOverride(material));
   sim::SimViewsOptions options;
+  if (material == "white") {
+    // A white product on the light backdrop, the exposure lowered as a photographer would so
+    // that it is not clipped (the backdrop is lit on its own).
+    options.render.exposure = 0.65;
+  }
+  if (backdrop == "black") {
+    options.render.backdrop_top = {0.07, 0.07, 0.07};
+    options.render.backdrop_bottom = {0.05, 0.05, 0.05};
+  } else if (backdrop == "grey") {
+    options.render.backdrop_top = {0.5, 0.5, 0.5};
+    options.render.backdrop_bottom = {0.45, 0.45, 0.45};
+  }
   options.rig.width = width;
   options.rig.height = height;
   options.stops = stops;

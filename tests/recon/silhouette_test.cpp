@@ -2,6 +2,12 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <ostream>
+#include <string>
+
 #include <opencv2/imgproc.hpp>
 
 #include "carousel/core/error.h"
@@ -46,6 +52,45 @@ INSTANTIATE_TEST_SUITE_P(Scenes, SilhouetteOnScene,
                          [](const auto& param_info) {
                            return param_info.param.first + "_" +
                                   SilhouetteMethodName(param_info.param.second);
+                         });
+
+// Hard products (issue 20): a model's materials overridden, keyed with the defaults. Per case,
+// every view's IoU against the exact silhouette, bounds from measurement (worst view: black on
+// black 0.9977, glossy 0.9919, white on grey 0.9965). White on the white backdrop is not here:
+// keyed, its shaded side is a shadow on the sweep to the colour test (IoU 0.36); that takes
+// backlit mask shots.
+struct HardProduct {
+  std::string scene;  // "model/material"
+  double min_iou;
+};
+
+void PrintTo(const HardProduct& product, std::ostream* out) { *out << product.scene; }
+
+class HardProductSilhouettes : public ::testing::TestWithParam<HardProduct> {};
+
+TEST_P(HardProductSilhouettes, EveryViewMatchesTheTruth) {
+  const HardProduct& product = GetParam();
+  const sim::SimViews& capture = testing::SimulatedCapture(product.scene);
+  Progress progress;
+  const SilhouettesResult result = ComputeSilhouettes(capture.views, {}, {}, progress);
+  double worst = 1.0, mean = 0.0;
+  for (std::size_t i = 0; i < capture.views.size(); ++i) {
+    const double iou = MaskIoU(result.masks[i], capture.truth_masks[i]);
+    EXPECT_GE(iou, product.min_iou) << capture.views[i].name();
+    worst = std::min(worst, iou);
+    mean += iou / static_cast<double>(capture.views.size());
+  }
+  std::printf("%s: IoU worst %.4f, mean %.4f\n", product.scene.c_str(), worst, mean);
+}
+
+INSTANTIATE_TEST_SUITE_P(Materials, HardProductSilhouettes,
+                         ::testing::Values(HardProduct{"bottle/white/grey", 0.995},
+                                           HardProduct{"bottle/black", 0.995},
+                                           HardProduct{"bottle/glossy", 0.99}),
+                         [](const auto& param_info) {
+                           std::string name = param_info.param.scene;
+                           std::replace(name.begin(), name.end(), '/', '_');
+                           return name;
                          });
 
 // A zoomed-in copy of a capture's view (fx, fy times `zoom`, the principal point moved by the

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <iostream>
 #include <numbers>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <opencv2/calib3d.hpp>
@@ -174,6 +175,39 @@ TEST(RendererTest, LightsStayInTheStudioWhileTheTableTurns) {
   const double off = cv::mean(diff_wrong, a.mask)[1];
   EXPECT_LT(right, 1.0);
   EXPECT_GT(off, 10.0 * right + 2.0);
+}
+
+// A glossy material adds white highlights of the studio lights and changes nothing else: the
+// same silhouette, never darker, brighter only in a small spot where the key light reflects.
+TEST(RendererTest, GlossyMaterialsAddSmallWhiteHighlights) {
+  Scene matte = MakeSphereScene(0.08, {0, 0, 0.08}, 5, {0.4f, 0.3f, 0.2f});
+  Scene glossy = matte;
+  glossy.OverrideMaterials(MaterialOverride::kGlossy);
+  const CameraModel camera = StudioCamera(320, 240, 20, matte.Bounds(), {});
+  RenderOptions options;
+  options.plate_radius_m = 0;
+  const RenderResult a = Render(matte, camera, 0.0, options);
+  const RenderResult b = Render(glossy, camera, 0.0, options);
+  EXPECT_EQ(cv::countNonZero(a.mask != b.mask), 0);
+  cv::Mat darker, brighter;
+  cv::subtract(a.image, b.image, darker);
+  cv::subtract(b.image, a.image, brighter);
+  double most_darker = 0.0, most_brighter = 0.0;
+  cv::minMaxLoc(darker.reshape(1), nullptr, &most_darker);
+  cv::minMaxLoc(brighter.reshape(1), nullptr, &most_brighter);
+  EXPECT_EQ(most_darker, 0.0);
+  EXPECT_GT(most_brighter, 60.0);
+  std::vector<cv::Mat> channels;
+  cv::split(brighter, channels);
+  const cv::Mat spot = channels[0] > 20;  // blue: white added to a brown sphere
+  const double fraction = cv::countNonZero(spot) / static_cast<double>(cv::countNonZero(a.mask));
+  EXPECT_GT(fraction, 0.001);
+  EXPECT_LT(fraction, 0.15);
+  // White: the blue channel gains as much as the red one in the spot.
+  EXPECT_NEAR(cv::mean(channels[0], spot)[0], cv::mean(channels[2], spot)[0], 25.0);
+  EXPECT_THROW(ParseMaterialOverride("chrome"), InvalidArgument);
+  EXPECT_EQ(ParseMaterialOverride(MaterialOverrideName(MaterialOverride::kBlack)),
+            MaterialOverride::kBlack);
 }
 
 // A finely tessellated disc under strong distortion: triangles split where the lens bends

@@ -41,7 +41,17 @@ struct Material {
   Eigen::Vector3f base_color{1.0f, 1.0f, 1.0f};  // multiplies the texture; linear, 0..1
   int texture = -1;                              // index into Scene::textures, -1 = none
   bool double_sided = true;
+  // Highlights (Blinn-Phong, white): strength (linear, 0 = matte) and exponent.
+  float specular = 0.0f;
+  float shininess = 50.0f;
 };
+
+// What a studio finds hard, on any scene: every material made white, black or glossy (its own
+// colours and a strong highlight).
+enum class MaterialOverride { kNone, kWhite, kBlack, kGlossy };
+// "none", "white", "black", "glossy". \throw InvalidArgument naming the others.
+MaterialOverride ParseMaterialOverride(const std::string& name);
+const char* MaterialOverrideName(MaterialOverride material);
 
 struct Scene {
   // Per vertex (all the same length).
@@ -68,6 +78,9 @@ struct Scene {
   // \throw InvalidArgument if arrays disagree in size, an index is out of range or a
   // coordinate is not finite.
   void Validate() const;
+  // Every material white (albedo 0.9, no texture), black (0.03) or glossy (its colours, a
+  // strong, sharp highlight); kNone changes nothing.
+  void OverrideMaterials(MaterialOverride material);
 };
 
 struct SceneLoadOptions {

@@ -46,6 +46,8 @@ struct SimCaptureOptions {
     return options;
   }();
   int jpeg_quality = 95;  // 1..100
+  // Every material of the model made white, black or glossy (sim::Scene::OverrideMaterials).
+  sim::MaterialOverride material = sim::MaterialOverride::kNone;
   // The product name recorded in the manifest; empty = the scene's name.
   std::string product;
   // Replace an existing session folder (after the new one is complete).
