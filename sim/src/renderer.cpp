@@ -5,9 +5,12 @@
 #include <atomic>
 #include <cmath>
 #include <exception>
+#include <limits>
 #include <mutex>
 #include <numbers>
 #include <thread>
+
+#include <opencv2/imgproc.hpp>
 
 #include "carousel/core/error.h"
 #include "carousel/core/mesh_primitives.h"
@@ -271,6 +274,45 @@ struct Sample {
   int triangle;
 };
 
+// The contact shadow's source: per cell of a grid on the table (z = 0, turntable frame), the
+// distance to the footprint of the object's base, metres.
+struct ContactShadowMap {
+  cv::Mat distance;     // CV_32FC1
+  double origin = 0.0;  // x and y of the grid's first cell's corner
+  double cell = 1.0;    // metres
+  float At(double x, double y) const {
+    const int i = static_cast<int>(std::floor((x - origin) / cell));
+    const int j = static_cast<int>(std::floor((y - origin) / cell));
+    if (i < 0 || j < 0 || i >= distance.cols || j >= distance.rows)
+      return std::numeric_limits<float>::infinity();
+    return distance.at<float>(j, i);
+  }
+};
+
+// The footprint of what of the object lies within `height` of the table, grown into a distance
+// map over the plate.
+ContactShadowMap MakeContactShadowMap(const Scene& scene, double plate_radius, double height) {
+  constexpr int kCells = 512;
+  ContactShadowMap map;
+  map.origin = -plate_radius;
+  map.cell = 2.0 * plate_radius / kCells;
+  cv::Mat free(kCells, kCells, CV_8UC1, cv::Scalar(255));
+  for (const Eigen::Vector3i& tri : scene.triangles) {
+    std::array<cv::Point, 3> corners;
+    double lowest = std::numeric_limits<double>::infinity();
+    for (int k = 0; k < 3; ++k) {
+      const Eigen::Vector3d& p = scene.positions[tri[k]];
+      lowest = std::min(lowest, p.z());
+      corners[k] = cv::Point(static_cast<int>(std::floor((p.x() - map.origin) / map.cell)),
+                             static_cast<int>(std::floor((p.y() - map.origin) / map.cell)));
+    }
+    if (lowest < height) cv::fillConvexPoly(free, corners.data(), 3, cv::Scalar(0));
+  }
+  cv::distanceTransform(free, map.distance, cv::DIST_L2, cv::DIST_MASK_5);
+  map.distance *= map.cell;
+  return map;
+}
+
 class Rasteriser {
  public:
   Rasteriser(const Scene& scene, const CameraModel& camera, const RenderOptions& options,
@@ -302,6 +344,7 @@ class Rasteriser {
       return out;
     };
     plate_ = linear(options.plate_color);
+    cam_translation_ = camera.cam_from_world.translation.cast<float>();
     // The backdrop is a vertical gradient: one colour per image row.
     const Eigen::Vector3f top = linear(options.backdrop_top);
     const Eigen::Vector3f bottom = linear(options.backdrop_bottom);
@@ -312,6 +355,8 @@ class Rasteriser {
     }
     mixed_seed_ = Mix(options.seed);
   }
+
+  void SetContactShadow(const ContactShadowMap* shadow) { shadow_ = shadow; }
 
   // Renders one tile; `buffer` is the calling worker's scratch space.
   void RenderTile(int tile, std::vector<Sample>& buffer) {
@@ -434,6 +479,13 @@ class Rasteriser {
       }
     }
     const float exposure = static_cast<float>(options_.exposure);
+    if (t.material < 0 && shadow_ != nullptr) {
+      // The object's base occludes the plate's light near it.
+      const Eigen::Vector3f world = world_from_cam_ * (position - cam_translation_);
+      const float d = shadow_->At(world.x(), world.y());
+      albedo *= 1.0f - static_cast<float>(options_.contact_shadow) *
+                           std::exp(-d / static_cast<float>(options_.contact_shadow_radius_m));
+    }
     if (!options_.lit) return albedo * exposure;
     const float length = n.norm();
     n = length > 0 ? Eigen::Vector3f(n / length) : Eigen::Vector3f::UnitZ();
@@ -560,6 +612,8 @@ class Rasteriser {
   int n_;
   int samples_;
   Eigen::Matrix3f world_from_cam_;
+  Eigen::Vector3f cam_translation_;
+  const ContactShadowMap* shadow_ = nullptr;
   std::vector<Eigen::Vector2d> offsets_;
   std::vector<Eigen::Vector3f> backdrop_rows_;  // linear RGB per image row
   Eigen::Vector3f plate_;
@@ -589,6 +643,11 @@ void RenderOptions::Validate() const {
   }
   CAROUSEL_THROW_IF(!(plate_radius_m >= 0), InvalidArgument,
                     "RenderOptions.plate_radius_m must be >= 0");
+  CAROUSEL_THROW_IF(!(contact_shadow >= 0 && contact_shadow <= 1) ||
+                        !(contact_shadow_radius_m > 0 && contact_shadow_radius_m < 1),
+                    InvalidArgument,
+                    "RenderOptions: contact_shadow must be in 0..1 and contact_shadow_radius_m in "
+                    "(0, 1) m");
   CAROUSEL_THROW_IF(!(noise_sigma >= 0 && noise_sigma <= 64), InvalidArgument,
                     "RenderOptions.noise_sigma must be in 0..64, got " << noise_sigma);
   CAROUSEL_THROW_IF(!(max_edge_error_px > 0), InvalidArgument,
@@ -674,6 +733,12 @@ RenderResult Render(const Scene& scene, const CameraModel& camera, double table_
   result.depth.create(camera.height, camera.width, CV_32FC1);
   result.triangles_rasterized = triangles.size();
   Rasteriser rasteriser(scene, camera, options, triangles, bins, tiles_x, lights_world, result);
+  ContactShadowMap shadow;
+  if (options.contact_shadow > 0 && options.plate_radius_m > 0) {
+    shadow = MakeContactShadowMap(scene, options.plate_radius_m + options.contact_shadow_radius_m,
+                                  options.contact_shadow_radius_m);
+    rasteriser.SetContactShadow(&shadow);
+  }
   const int tile_count = tiles_x * tiles_y;
   std::atomic<int> next{0};
   std::mutex error_mutex;

@@ -66,9 +66,9 @@ Eigen::Vector3d ParseBackdropColour(const std::string& text, const std::string& 
 
 const std::vector<std::string>& RunSimFieldNames() {
   static const std::vector<std::string> names = {
-      "scene",         "data",     "views",   "size",     "elevations",
-      "focal-mm",      "distance", "noise",   "seed",     "jpeg-quality",
-      "target-height", "scale",    "yaw-deg", "material", "exposure"};
+      "scene",    "data",     "views",    "size",          "elevations",    "focal-mm",
+      "distance", "noise",    "seed",     "jpeg-quality",  "target-height", "scale",
+      "yaw-deg",  "material", "exposure", "contact-shadow"};
   return names;
 }
 
@@ -134,6 +134,11 @@ const OptionTable<SimCaptureOptions>& SimCaptureOptions::Fields() {
            .max = 16,
            .min_exclusive = true},
           [](O& o) -> OptionRef { return &o.render.exposure; });
+    t.Add({.name = "contact-shadow",
+           .help = "the object's contact shadow on the plate: how much darker at its base",
+           .min = 0,
+           .max = 1},
+          [](O& o) -> OptionRef { return &o.render.contact_shadow; });
     t.AddChoice(&O::material,
                 {.name = "material",
                  .help = "every material of the model made white, black or glossy (what studios "

@@ -28,6 +28,7 @@ const sim::SimViews& SimulatedCapture(const std::string& name) {
   const std::string material = parts.size() > 1 ? parts[1] : "none";
   const std::string backdrop =
       parts.size() > 2 ? parts[2] : (material == "black" ? "black" : "light");
+  const bool contact_shadow = parts.size() > 3 && parts[3] == "shadow";
   sim::Scene scene;
   constexpr double kSize = 0.25;
   int stops = 16;
@@ -61,6 +62,7 @@ const sim::SimViews& SimulatedCapture(const std::string& name) {
     // that it is not clipped (the backdrop is lit on its own).
     options.render.exposure = 0.65;
   }
+  if (contact_shadow) options.render.contact_shadow = 0.6;
   if (backdrop == "black") {
     options.render.backdrop_top = {0.07, 0.07, 0.07};
     options.render.backdrop_bottom = {0.05, 0.05, 0.05};

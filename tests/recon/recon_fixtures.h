@@ -12,7 +12,7 @@ namespace carousel::recon::testing {
 // and JPEG, background plates, truth masks.
 // "scene/material[/backdrop]" overrides its materials (white: the exposure lowered so that it
 // is not clipped; black; glossy: highlights), on the default light backdrop (black: on a black
-// one) or on the one named (grey, black).
+// one) or on the one named (grey, black, light); ".../shadow" adds a contact shadow on the plate.
 const sim::SimViews& SimulatedCapture(const std::string& scene);
 
 }  // namespace carousel::recon::testing

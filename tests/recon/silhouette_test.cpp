@@ -86,7 +86,8 @@ TEST_P(HardProductSilhouettes, EveryViewMatchesTheTruth) {
 INSTANTIATE_TEST_SUITE_P(Materials, HardProductSilhouettes,
                          ::testing::Values(HardProduct{"bottle/white/grey", 0.995},
                                            HardProduct{"bottle/black", 0.995},
-                                           HardProduct{"bottle/glossy", 0.99}),
+                                           HardProduct{"bottle/glossy", 0.99},
+                                           HardProduct{"bottle/none/light/shadow", 0.99}),
                          [](const auto& param_info) {
                            std::string name = param_info.param.scene;
                            std::replace(name.begin(), name.end(), '/', '_');

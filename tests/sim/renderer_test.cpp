@@ -210,6 +210,34 @@ TEST(RendererTest, GlossyMaterialsAddSmallWhiteHighlights) {
             MaterialOverride::kBlack);
 }
 
+// The contact shadow darkens the plate at the object's base and fades with distance; the
+// object and the mask are untouched.
+TEST(RendererTest, ContactShadowDarkensThePlateAtTheBaseOnly) {
+  const Scene sphere = MakeSphereScene(0.05, {0, 0, 0.05}, 5, {0.7f, 0.7f, 0.7f});
+  const CameraModel camera = StudioCamera(320, 240, 30, sphere.Bounds(), {});
+  RenderOptions options;
+  options.plate_radius_m = 0.15;
+  const RenderResult plain = Render(sphere, camera, 0.0, options);
+  options.contact_shadow = 0.6;
+  const RenderResult shadowed = Render(sphere, camera, 0.0, options);
+  EXPECT_EQ(cv::countNonZero(plain.mask != shadowed.mask), 0);
+  cv::Mat diff, inside;
+  cv::absdiff(plain.image, shadowed.image, diff);
+  // The object itself, away from its anti-aliased outline (whose pixels hold plate samples).
+  cv::erode(plain.mask, inside, cv::Mat(), cv::Point(-1, -1), 2);
+  EXPECT_EQ(cv::mean(diff, inside)[1], 0.0);
+  // Plate pixels just below the sphere's image (its base) against the plate's far rim.
+  const cv::Rect box = cv::boundingRect(plain.mask);
+  const int below = std::min(box.br().y + 2, camera.height - 1);
+  const int centre = box.x + box.width / 2;
+  const cv::Vec3b near_plain = plain.image.at<cv::Vec3b>(below, centre);
+  const cv::Vec3b near_shadow = shadowed.image.at<cv::Vec3b>(below, centre);
+  EXPECT_LT(near_shadow[1] + 20, near_plain[1]);
+  const cv::Vec3b far_plain = plain.image.at<cv::Vec3b>(camera.height - 3, 3);
+  const cv::Vec3b far_shadow = shadowed.image.at<cv::Vec3b>(camera.height - 3, 3);
+  EXPECT_NEAR(far_shadow[1], far_plain[1], 1.0);
+}
+
 // A finely tessellated disc under strong distortion: triangles split where the lens bends
 // their edges, neighbours differently; no backdrop may show through between them.
 TEST(RendererTest, SubdividedNeighboursLeaveNoCracks) {

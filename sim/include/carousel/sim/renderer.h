@@ -51,6 +51,11 @@ struct RenderOptions {
   // Turntable plate: a disc of this radius (metres) at z = 0; 0 = no plate.
   double plate_radius_m = 0.2;
   Eigen::Vector3d plate_color{0.55, 0.55, 0.57};  // sRGB, RGB order
+  // Contact shadow on the plate (the object's base occluding its light): the plate's colour
+  // falls by this fraction at the object's footprint, fading as exp(-distance / radius); the
+  // footprint is what of the object lies within the radius of the table. 0 = none.
+  double contact_shadow = 0.0;
+  double contact_shadow_radius_m = 0.015;
   // Gaussian sensor noise, standard deviation in 8-bit levels (0 = none).
   double noise_sigma = 0.0;
   // Seed of the noise.
