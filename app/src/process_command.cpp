@@ -56,11 +56,13 @@ int RunProcess(const ProcessArgs& args, Io& io) {
                          args.options.publish, studio::RecordedPublishOptions(session));
       const studio::ProcessResult result = studio::ProcessSession(session, options, cli.progress());
       if (result.reconstruct) {
+        io.out << "reconstruct: ran (" << result.reconstruct_reason << ")\n";
         PrintReconstruct(session, *result.reconstruct, io.out);
       } else {
         io.out << "reconstruct: current, skipped\n";
       }
       if (result.texture) {
+        io.out << "texture: ran (" << result.texture_reason << ")\n";
         PrintTexture(session, *result.texture, io.out);
       } else {
         io.out << "texture: current, skipped\n";

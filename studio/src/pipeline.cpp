@@ -112,6 +112,26 @@ std::string Staleness(const Session& session, const char* stage, const std::stri
   return "";
 }
 
+// The reconstruction's fingerprint: every photo as it is on disk now (read again, never the
+// checksum recorded at capture, so that a photo damaged or replaced since makes the stage stale),
+// its pose and the options. The photos whose file no longer matches their recorded checksum are
+// added to *changed (when given).
+std::string ReconstructInputs(const std::filesystem::path& folder, const Session& session,
+                              const ReconstructOptions& options,
+                              std::vector<std::string>* changed) {
+  std::ostringstream inputs;
+  inputs << "frame=" << session.frame << '\n';
+  for (const SessionView& view : session.views) {
+    const std::string sha = FileSha256(folder / view.image);
+    if (changed != nullptr && !view.sha256.empty() && view.sha256 != sha)
+      changed->push_back(view.image);
+    inputs << view.image << ' ' << sha << ' ' << std::setprecision(17) << view.table_angle_deg
+           << ' ' << CameraModelToJson(view.camera_model).dump() << '\n';
+  }
+  inputs << Describe(options);
+  return Sha256(inputs.str());
+}
+
 void RecordInputs(const std::filesystem::path& folder, Session& session, const char* stage,
                   const std::string& fingerprint, double seconds) {
   session.stage_inputs[stage] = fingerprint;
@@ -134,17 +154,7 @@ std::string ReconstructFingerprint(const std::filesystem::path& folder,
 
 std::string ReconstructFingerprint(const std::filesystem::path& folder, const Session& session,
                                    const ReconstructOptions& options) {
-  std::ostringstream inputs;
-  inputs << "frame=" << session.frame << '\n';
-  for (const SessionView& view : session.views) {
-    // Photos are never rewritten: a recorded checksum stands for the file; imported sessions
-    // have none and are hashed here.
-    const std::string sha = view.sha256.empty() ? FileSha256(folder / view.image) : view.sha256;
-    inputs << view.image << ' ' << sha << ' ' << std::setprecision(17) << view.table_angle_deg
-           << ' ' << CameraModelToJson(view.camera_model).dump() << '\n';
-  }
-  inputs << Describe(options);
-  return Sha256(inputs.str());
+  return ReconstructInputs(folder, session, options, nullptr);
 }
 
 std::string TextureFingerprint(const std::filesystem::path& folder,
@@ -164,7 +174,9 @@ ProcessResult ProcessSession(const std::filesystem::path& folder, Session& sessi
                              const ProcessOptions& options, Progress& progress) {
   options.Validate();
   ProcessResult result;
-  const std::string recon_inputs = ReconstructFingerprint(folder, session, options.reconstruct);
+  std::vector<std::string> changed_photos;
+  const std::string recon_inputs =
+      ReconstructInputs(folder, session, options.reconstruct, &changed_photos);
   bool masks_present = true;
   for (const SessionView& view : session.views) {
     masks_present =
@@ -175,6 +187,13 @@ ProcessResult ProcessSession(const std::filesystem::path& folder, Session& sessi
           ? "forced"
           : Staleness(session, kReconstruct, recon_inputs,
                       masks_present && AllExist(folder, {"recon/hull.ply", "recon/mesh.ply"}));
+  if (result.reconstruct_reason == "inputs or options changed" && !changed_photos.empty()) {
+    result.reconstruct_reason =
+        "photo " + changed_photos.front() +
+        (changed_photos.size() > 1 ? " and " + std::to_string(changed_photos.size() - 1) + " more"
+                                   : std::string()) +
+        " changed since capture (checksum differs from session.json)";
+  }
   if (!result.reconstruct_reason.empty()) {
     CAROUSEL_LOG_INFO(folder.string()
                       << ": reconstruct runs (" << result.reconstruct_reason << ")");

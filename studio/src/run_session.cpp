@@ -25,6 +25,19 @@ constexpr const char* kRunFile = "run.json";
 // The rig calibration a session's photos take their cameras from (a copy of --calibration-file).
 constexpr const char* kSessionCalibration = "calibration.json";
 
+// The renderer settings run.json keeps by their flag names.
+const OptionTable<SimCaptureOptions>& SimRenderFields() {
+  static const OptionTable<SimCaptureOptions> table =
+      SimCaptureOptions::Fields().Only({"material", "exposure", "contact-shadow"});
+  return table;
+}
+
+// A relative path as seen from here, made absolute: run.json is read again by `run --resume`
+// from any working directory and by batch jobs on other nodes.
+std::filesystem::path Absolute(const std::filesystem::path& path) {
+  return path.empty() ? path : std::filesystem::absolute(path).lexically_normal();
+}
+
 json RunToJson(const RunOptions& o) {
   const SimCaptureOptions& s = o.sim;
   json run = {
@@ -50,6 +63,8 @@ json RunToJson(const RunOptions& o) {
        {{"exclude_views", o.texture.grouping.exclude_views}, {"size", o.texture.atlas.size.size}}},
       {"publish", OptionsToJson(PublishSessionOptions::Fields(), o.publish)},
       {"publish_model", o.publish_model}};
+  // The renderer's look (material, exposure, contact shadow), by their flag names.
+  run["sim"].update(OptionsToJson(SimRenderFields(), s));
   // The rig as it was when the session started: a resume uses the same devices and plan even
   // if the rig file changed meanwhile.
   if (o.hardware) run["rig"] = json::parse(RigConfigToJsonText(*o.hardware));
@@ -87,6 +102,8 @@ RunOptions RunFromJson(const std::filesystem::path& path) {
     o.sim.placement.target_height_m = s.at("target_height_m").get<double>();
     o.sim.placement.scale = s.at("scale").get<double>();
     o.sim.placement.yaw_rad = s.at("yaw_rad").get<double>();
+    // Sessions from before these were recorded render with today's defaults.
+    OptionsFromJson(SimRenderFields(), s, &o.sim, path);
     o.texture.grouping.exclude_views = j.at("texture").at("exclude_views").get<std::vector<int>>();
     o.texture.atlas.size.size = j.at("texture").at("size").get<int>();
     // Sessions started before publish options were recorded publish with today's defaults.
@@ -237,6 +254,10 @@ std::string SessionNameForProduct(const std::string& product) {
 RunResult RunSession(const RunOptions& requested, Progress& progress) {
   requested.Validate();
   RunOptions options = requested;
+  options.sim.data_dir = Absolute(options.sim.data_dir);
+  if (IsSceneFile(options.sim.scene)) options.sim.scene = Absolute(options.sim.scene).string();
+  if (!options.calibration_file.empty())
+    options.calibration_file = Absolute(options.calibration_file);
   if (options.calibration && !options.hardware) {
     // The simulated board's height above the plate is known exactly.
     options.calibration->board_origin_height_m = SimBoardOriginHeight(*options.calibration);

@@ -198,6 +198,11 @@ void SimCaptureOptions::Validate() const {
   render.Validate();
 }
 
+bool IsSceneFile(const std::string& scene) {
+  return !SceneNames().contains(scene) &&
+         (scene.find('/') != std::string::npos || scene.find('.') != std::string::npos);
+}
+
 std::filesystem::path ResolveScene(const std::string& scene,
                                    const std::filesystem::path& data_dir) {
   std::filesystem::path path;
@@ -205,7 +210,7 @@ std::filesystem::path ResolveScene(const std::string& scene,
     CAROUSEL_THROW_IF(data_dir.empty(), InvalidArgument,
                       "scene '" << scene << "' needs the shared data folder (--data)");
     path = data_dir / it->second;
-  } else if (scene.find('/') != std::string::npos || scene.find('.') != std::string::npos) {
+  } else if (IsSceneFile(scene)) {
     path = scene;
   } else {
     std::string known;

@@ -12,6 +12,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include <chrono>
 #include <fstream>
@@ -266,6 +268,31 @@ TEST(RunSessionTest, ProcessSkipsCurrentStagesAndRunsABatchPastAFailure) {
   EXPECT_THAT(text, ::testing::HasSubstr("reconstruct: current, skipped"));
   EXPECT_THAT(text, ::testing::Not(::testing::HasSubstr("texture: current")));
   EXPECT_TRUE(std::filesystem::exists(session / "model" / "model.glb"));
+  // A photo damaged since capture: its recorded checksum is not trusted, the file is read
+  // again, so the reconstruction is stale and fails naming the photo (nothing is overwritten).
+  const auto photo = session / "images" / "cam0_stop01.jpg";
+  const std::string photo_bytes = testing::ReadBytes(photo);
+  const std::string mesh_bytes = testing::ReadBytes(session / "recon" / "mesh.ply");
+  testing::WriteBytes(photo, photo_bytes.substr(0, photo_bytes.size() / 3));
+  {
+    const std::vector<std::string> args = {
+        "carousel", "--log-level", "info", "--log-file",    (dir / "process.log").string(),
+        "process",  "--faces",     "2000", session.string()};
+    std::vector<const char*> argv;
+    for (const auto& a : args) argv.push_back(a.c_str());
+    std::ostringstream out, err;
+    EXPECT_NE(RunCli(static_cast<int>(argv.size()), argv.data(), out, err), 0);
+    text = out.str() + err.str() + testing::ReadBytes(dir / "process.log");
+  }
+  EXPECT_THAT(text, ::testing::HasSubstr("reconstruct runs (photo images/cam0_stop01.jpg changed "
+                                         "since capture"));
+  EXPECT_THAT(text, ::testing::HasSubstr("error: "));
+  EXPECT_THAT(text.substr(text.find("error: ")), ::testing::HasSubstr("cam0_stop01.jpg"));
+  EXPECT_EQ(testing::ReadBytes(session / "recon" / "mesh.ply"), mesh_bytes);
+  // The photo as captured again: nothing to do.
+  testing::WriteBytes(photo, photo_bytes);
+  EXPECT_EQ(run({"--faces", "2000", session.string()}, &text), 0) << text;
+  EXPECT_THAT(text, ::testing::HasSubstr("reconstruct: current, skipped"));
   // A recalibrated camera makes the reconstruction stale.
   Session manifest = ReadSession(session);
   manifest.views[0].camera_model.fx *= 1.001;
@@ -323,6 +350,64 @@ TEST(RunSessionTest, ResumeRetakesMissingAndDamagedPhotosAndKeepsTheDamagedCopy)
   EXPECT_FALSE(again.textured);
   // An existing session is never replaced without --force.
   EXPECT_EQ(Wait(Spawn(RunArgs(dir.path()))), kExitIoError);
+}
+
+// run.json holds what a resume needs from anywhere: the data folder as an absolute path (it was
+// given relative to another working folder) and the rendering's material, exposure and contact
+// shadow, so that a photo retaken on resume is the photo that was lost, byte for byte.
+TEST(RunSessionTest, ResumesFromAnotherFolderWithTheRecordedRendering) {
+  TempDir dir;
+  std::filesystem::create_directories(dir / "a");
+  std::filesystem::create_directories(dir / "b");
+  const std::string data = std::filesystem::relative(testing::SharedDataDir(), dir / "a").string();
+  const testing::ShellResult run = testing::RunShell(
+      "cd '" + (dir / "a").string() + "' && " + testing::CarouselExecutable() +
+      " --log-level off run --sim --product relative --out sessions --data '" + data +
+      "' --scene bottle --views 4 --size 240x160 --material glossy --exposure 1.25 "
+      "--contact-shadow 0.5 --no-publish");
+  ASSERT_EQ(run.code, 0) << run.out;
+  const auto session = dir / "a" / "sessions" / "relative";
+  const nlohmann::json recorded =
+      nlohmann::json::parse(testing::ReadBytes(session / "run.json")).at("sim");
+  const std::filesystem::path data_dir = recorded.at("data_dir").get<std::string>();
+  EXPECT_TRUE(data_dir.is_absolute()) << data_dir;
+  EXPECT_EQ(std::filesystem::weakly_canonical(data_dir),
+            std::filesystem::weakly_canonical(testing::SharedDataDir()));
+  EXPECT_EQ(recorded.at("material"), "glossy");
+  EXPECT_DOUBLE_EQ(recorded.at("exposure").get<double>(), 1.25);
+  EXPECT_DOUBLE_EQ(recorded.at("contact-shadow").get<double>(), 0.5);
+  // A retaken photo has its own sensor noise, so it is compared by its pixels: the fraction
+  // that differ from the lost photo's by more than 16 levels (noise alone: hardly any).
+  const auto photo = session / "images" / "cam0_stop02.jpg";
+  const cv::Mat lost = cv::imread(photo.string());
+  ASSERT_FALSE(lost.empty());
+  const auto retake = [&] {
+    std::filesystem::remove(photo);
+    const testing::ShellResult resume =
+        testing::RunShell("cd '" + (dir / "b").string() + "' && " + testing::CarouselExecutable() +
+                          " --log-level off run --resume '" + session.string() + "'");
+    EXPECT_EQ(resume.code, 0) << resume.out;
+    const cv::Mat again = cv::imread(photo.string());
+    if (again.size() != lost.size()) return 1.0;
+    cv::Mat difference;
+    cv::absdiff(lost, again, difference);
+    cv::Mat channels[3];
+    cv::split(difference, channels);
+    const cv::Mat worst = cv::max(cv::max(channels[0], channels[1]), channels[2]);
+    return cv::countNonZero(worst > 16) / static_cast<double>(lost.total());
+  };
+  const double recorded_difference = retake();
+  // The same session as run.json recorded it before the rendering was kept: today's defaults.
+  nlohmann::json run_json = nlohmann::json::parse(testing::ReadBytes(session / "run.json"));
+  for (const char* key : {"material", "exposure", "contact-shadow"}) run_json["sim"].erase(key);
+  testing::WriteBytes(session / "run.json", run_json.dump(2));
+  const double default_difference = retake();
+  std::printf(
+      "retaken photo vs lost: %.4f of the pixels differ with the recorded rendering, "
+      "%.4f without\n",
+      recorded_difference, default_difference);
+  EXPECT_LT(recorded_difference, 0.001);
+  EXPECT_GT(default_difference, 0.004);
 }
 
 // The program under a file-size limit (a full disk as far as the writes can tell): its output

@@ -62,6 +62,9 @@ struct SimCaptureOptions {
 // file is missing.
 std::filesystem::path ResolveScene(const std::string& scene, const std::filesystem::path& data_dir);
 
+// Whether `scene` is a file path rather than one of the model names.
+bool IsSceneFile(const std::string& scene);
+
 struct SimCaptureResult {
   std::filesystem::path session;
   int views = 0;
