@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "carousel/core/logging.h"
+#include "carousel/core/parallel.h"
 #include "carousel/core/version.h"
 #include "command.h"
 
@@ -31,6 +32,10 @@ constexpr CommandGroup kCommands[] = {
      "the web GLB, viewer page, catalog images and report page of textured sessions (publish "
      "flags change what they name; the rest as the session last published)",
      AddPublishCommand},
+    {"batch",
+     "many sessions as independent tasks: N at once here, a Slurm job array (--slurm) or a "
+     "Kubernetes Indexed Job (--k8s-manifest); a summary of every one",
+     AddBatchCommand},
     {"run", "the one-button session: capture, reconstruct, texture, export, publish",
      AddRunCommand},
     {"turntable", "identify, home, move, trigger and configure the turntable controller",
@@ -125,6 +130,11 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
   app.add_option("--log-level", log_level, "debug, info, warn, error or off")
       ->capture_default_str();
   app.add_option("--log-file", log_file, "also append the log to this file");
+  int threads = 0;
+  app.add_option("--threads", threads,
+                 "worker threads of every stage (0 = $CAROUSEL_THREADS, else one per core); the "
+                 "outputs are the same whatever the count")
+      ->check(CLI::Range(0, 4096));
   app.footer(
       "Exit codes: 0 ok, 1 failure, 64 usage, 65 malformed input file, 69 not built yet,\n"
       "74 file I/O error, 75 device error, 76 protocol error, 130 cancelled.");
@@ -167,6 +177,7 @@ int RunCli(int argc, const char* const* argv, std::ostream& out, std::ostream& e
   try {
     SetLogLevel(ParseLogLevel(log_level));
     if (!log_file.empty()) SetLogFile(log_file);
+    if (threads > 0) SetDefaultThreadCount(threads);
     const Runner* runner = dispatch.Parsed();
     if (runner == nullptr) {
       err << "carousel: no subcommand\n";

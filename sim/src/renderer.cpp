@@ -14,6 +14,7 @@
 
 #include "carousel/core/error.h"
 #include "carousel/core/mesh_primitives.h"
+#include "carousel/core/parallel.h"
 
 namespace carousel::sim {
 namespace {
@@ -754,10 +755,7 @@ RenderResult Render(const Scene& scene, const CameraModel& camera, double table_
       if (!error) error = std::current_exception();
     }
   };
-  int threads = options.threads > 0
-                    ? options.threads
-                    : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  threads = std::min(threads, tile_count);
+  const int threads = std::min(ResolveThreadCount(options.threads), tile_count);
   {
     std::vector<std::jthread> pool;
     try {

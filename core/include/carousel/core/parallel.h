@@ -11,8 +11,14 @@
 
 namespace carousel {
 
-// Worker threads to use for `requested` (0 = one per hardware thread), at least 1.
+// Worker threads to use for `requested`, at least 1. 0 means the process's default: the count
+// given to SetDefaultThreadCount, else $CAROUSEL_THREADS, else one per hardware thread. A batch
+// running several sessions at once gives each of its processes a share of the cores this way.
 int ResolveThreadCount(int requested);
+
+// The count ResolveThreadCount(0) answers from now on (0: back to $CAROUSEL_THREADS or the
+// hardware). \throw InvalidArgument when negative.
+void SetDefaultThreadCount(int threads);
 
 // Calls body(begin, end) for consecutive chunks of at most `chunk` items covering [0, count).
 // \pre chunk >= 1. \throw whatever body throws (the first exception).
