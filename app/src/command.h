@@ -60,6 +60,7 @@ void AddReconstructCommand(CLI::App& command, Dispatch& dispatch);
 void AddTextureCommands(CLI::App& command, Dispatch& dispatch);
 void AddProcessCommand(CLI::App& command, Dispatch& dispatch);
 void AddPublishCommand(CLI::App& command, Dispatch& dispatch);
+void AddBatchCommand(CLI::App& command, Dispatch& dispatch);
 void AddRunCommand(CLI::App& command, Dispatch& dispatch);
 void AddTurntableCommand(CLI::App& command, Dispatch& dispatch);
 void AddCameraCommand(CLI::App& command, Dispatch& dispatch);
