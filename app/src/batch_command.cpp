@@ -71,8 +71,8 @@ struct BatchArgs {
   std::filesystem::path catalog;
   std::filesystem::path out = "batch";
   ProcessFlags process;
-  int jobs = 0;                 // 0: from the cores and the memory
-  int memory_per_session = 0;   // MB; 0: estimated from the photos
+  int jobs = 0;                // 0: from the cores and the memory
+  int memory_per_session = 0;  // MB; 0: estimated from the photos
   bool slurm = false;
   std::filesystem::path k8s_manifest;
   studio::BatchJobOptions job;
@@ -213,8 +213,9 @@ int RunTask(const TaskArgs& args, Io& io) {
              << (record.job.empty() ? "" : ", Slurm task " + record.job) << '\n'
              << std::flush;
 
-  std::vector<std::string> words = {"carousel",   "--log-level", "info", "--log-file",
-                                    log.string(), "process",     item.session.string()};
+  std::vector<std::string> words = {"carousel",           "--log-level", "info",
+                                    "--log-file",         log.string(),  "process",
+                                    item.session.string()};
   const std::vector<std::string> flags = args.process.Args();
   words.insert(words.end(), flags.begin(), flags.end());
   std::vector<const char*> argv;
@@ -241,8 +242,8 @@ int RunTask(const TaskArgs& args, Io& io) {
              << record.seconds << " s, peak " << record.peak_mb << " MB (exit code " << code
              << ")\n";
   WriteRecord(args.folder, record);
-  io.out << item.sku << ": " << record.status
-         << (record.error.empty() ? "" : ": " + record.error) << '\n';
+  io.out << item.sku << ": " << record.status << (record.error.empty() ? "" : ": " + record.error)
+         << '\n';
   return code;
 }
 
@@ -301,7 +302,8 @@ pid_t SpawnTask(const BatchArgs& args, const std::filesystem::path& folder, int 
   std::vector<char*> argv;
   for (std::string& w : words) argv.push_back(w.data());
   argv.push_back(nullptr);
-  const std::string output = (folder / "logs" / ("task-" + std::to_string(index) + ".out")).string();
+  const std::string output =
+      (folder / "logs" / ("task-" + std::to_string(index) + ".out")).string();
   posix_spawn_file_actions_t actions;
   posix_spawn_file_actions_init(&actions);
   posix_spawn_file_actions_addopen(&actions, 0, "/dev/null", O_RDONLY, 0);
@@ -327,7 +329,8 @@ int RunLocal(const BatchArgs& args, const std::vector<BatchItem>& items, Io& io)
   const int cores = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
   double per_session = args.memory_per_session;
   if (per_session <= 0)
-    for (const BatchItem& item : items) per_session = std::max(per_session, EstimatedSessionMb(item));
+    for (const BatchItem& item : items)
+      per_session = std::max(per_session, EstimatedSessionMb(item));
   int jobs = args.jobs;
   std::string why;
   if (jobs <= 0) {
@@ -392,7 +395,8 @@ int RunLocal(const BatchArgs& args, const std::vector<BatchItem>& items, Io& io)
     io.out << '\n' << std::flush;
   }
   studio::WriteBatchSummary(folder, records);
-  io.out << studio::BatchTable(records) << "wall time " << static_cast<int>(watch.ElapsedSeconds() * 10) / 10.0
+  io.out << studio::BatchTable(records) << "wall time "
+         << static_cast<int>(watch.ElapsedSeconds() * 10) / 10.0
          << " s; summary: " << (folder / "summary.csv").string() << ", "
          << (folder / "summary.json").string() << '\n';
   const bool all_done = std::all_of(records.begin(), records.end(),
@@ -427,8 +431,7 @@ json ReadJobs(const std::filesystem::path& folder) {
 // Task index -> Slurm state ("PENDING", "RUNNING", ...) of `job`'s tasks still queued.
 // \throw DeviceError when squeue cannot reach the cluster.
 std::map<int, std::string> QueuedTasks(const std::string& job) {
-  const auto [code, output] =
-      Shell("squeue -h -r -j " + studio::ShellQuote(job) + " -o '%i|%T'");
+  const auto [code, output] = Shell("squeue -h -r -j " + studio::ShellQuote(job) + " -o '%i|%T'");
   std::map<int, std::string> tasks;
   if (code != 0) {
     // A job Slurm no longer knows (finished long ago) is not an error.
@@ -494,8 +497,7 @@ int SubmitSlurm(const BatchArgs& args, const std::vector<BatchItem>& items, Io& 
   job.process_args = args.process.Args();
   const std::filesystem::path script = folder / "job.sbatch";
   WriteFileAtomic(script, studio::SbatchScript(folder, static_cast<int>(items.size()), job));
-  const auto [code, output] =
-      Shell("sbatch --parsable " + studio::ShellQuote(script.string()));
+  const auto [code, output] = Shell("sbatch --parsable " + studio::ShellQuote(script.string()));
   if (code != 0) throw DeviceError("sbatch", Trimmed(output));
   const std::string id = Trimmed(output.substr(0, output.find(';')));
   if (id.empty() || id.find_first_not_of("0123456789") != std::string::npos)
@@ -520,8 +522,8 @@ int WriteKubernetes(const BatchArgs& args, const std::vector<BatchItem>& items, 
   CreateParentFolder(args.k8s_manifest);
   WriteFileAtomic(args.k8s_manifest, studio::KubernetesManifest(folder, items, job));
   io.out << "wrote " << args.k8s_manifest.string() << ": an Indexed Job of " << items.size()
-         << " tasks over " << (folder / "tasks.json").string()
-         << "; kubectl apply -f " << args.k8s_manifest.string() << '\n';
+         << " tasks over " << (folder / "tasks.json").string() << "; kubectl apply -f "
+         << args.k8s_manifest.string() << '\n';
   return kExitOk;
 }
 
@@ -551,8 +553,8 @@ std::vector<BatchRecord> Status(const std::filesystem::path& folder, bool* activ
       // A queued task's record is an earlier attempt's, or an earlier job's.
       if (state != "running" || !this_job) record.error.clear();
       record.status = state;
-    } else if (record.status == "running" && job.empty() && record.host == host &&
-               record.pid > 0 && ::kill(record.pid, 0) == 0) {
+    } else if (record.status == "running" && job.empty() && record.host == host && record.pid > 0 &&
+               ::kill(record.pid, 0) == 0) {
       // A local batch still at work.
     } else if (record.status == "running") {
       // It started and never said how it ended: killed (scancel, a time limit, a lost node).
@@ -587,9 +589,9 @@ int RunStatus(const StatusArgs& args, Io& io) {
   std::vector<BatchRecord> records = Status(folder, &active);
   Stopwatch watch;
   while (args.wait && active) {
-    CAROUSEL_THROW_IF(watch.ElapsedSeconds() > args.timeout, Error,
-                      "carousel batch status: the job is still running after " << args.timeout
-                                                                             << " s");
+    CAROUSEL_THROW_IF(
+        watch.ElapsedSeconds() > args.timeout, Error,
+        "carousel batch status: the job is still running after " << args.timeout << " s");
     std::this_thread::sleep_for(std::chrono::seconds(2));
     records = Status(folder, &active);
   }
@@ -612,34 +614,41 @@ void AddBatchCommand(CLI::App& command, Dispatch& dispatch) {
   command.add_option("sessions", args->sessions, "session folders");
   command.add_option("--catalog", args->catalog,
                      "a CSV of SKU,session folder lines (relative folders: from the CSV's)");
-  command.add_option("--out", args->out,
-                     "the batch folder: task list, per-task records, summary.csv/.json, job files")
+  command
+      .add_option("--out", args->out,
+                  "the batch folder: task list, per-task records, summary.csv/.json, job files")
       ->capture_default_str();
   AddProcessFlags(&command, &args->process);
-  command.add_option("--jobs", args->jobs,
-                     "sessions at once on this machine (0: from the cores and the memory)")
+  command
+      .add_option("--jobs", args->jobs,
+                  "sessions at once on this machine (0: from the cores and the memory)")
       ->check(CLI::Range(0, 1024))
       ->capture_default_str();
-  command.add_option("--memory-per-session", args->memory_per_session,
-                     "MB one session needs at its peak, for --jobs 0 (0: estimated from its "
-                     "photos)")
+  command
+      .add_option("--memory-per-session", args->memory_per_session,
+                  "MB one session needs at its peak, for --jobs 0 (0: estimated from its "
+                  "photos)")
       ->check(CLI::Range(0, 1 << 24));
   command.add_flag("--slurm", args->slurm,
                    "submit a Slurm job array instead (one task per session; sessions and the "
                    "batch folder must be at the same path on every node)");
-  command.add_option("--max-parallel", args->job.max_parallel,
-                     "Slurm/Kubernetes: tasks at once (0: as many as the cluster gives)")
+  command
+      .add_option("--max-parallel", args->job.max_parallel,
+                  "Slurm/Kubernetes: tasks at once (0: as many as the cluster gives)")
       ->check(CLI::Range(0, 100000));
-  command.add_option("--cpus-per-task", args->job.cpus_per_task,
-                     "Slurm/Kubernetes: cores per task (its thread count)")
+  command
+      .add_option("--cpus-per-task", args->job.cpus_per_task,
+                  "Slurm/Kubernetes: cores per task (its thread count)")
       ->check(CLI::Range(1, 1024))
       ->capture_default_str();
-  command.add_option("--mem-per-task", args->job.memory_mb,
-                     "Slurm/Kubernetes: memory per task, MB (0: not requested)")
+  command
+      .add_option("--mem-per-task", args->job.memory_mb,
+                  "Slurm/Kubernetes: memory per task, MB (0: not requested)")
       ->check(CLI::Range(0, 1 << 24));
-  command.add_option("--retries", args->job.retries,
-                     "Slurm/Kubernetes: times a task failing for a reason other than bad input is "
-                     "requeued")
+  command
+      .add_option("--retries", args->job.retries,
+                  "Slurm/Kubernetes: times a task failing for a reason other than bad input is "
+                  "requeued")
       ->check(CLI::Range(0, 100))
       ->capture_default_str();
   command.add_option("--partition", args->job.partition, "Slurm: the partition");
@@ -651,8 +660,9 @@ void AddBatchCommand(CLI::App& command, Dispatch& dispatch) {
                      "runs here)");
   command.add_option("--image", args->job.image, "Kubernetes: the container image")
       ->capture_default_str();
-  command.add_option("--volume-claim", args->job.volume_claim,
-                     "Kubernetes: the PersistentVolumeClaim holding the sessions")
+  command
+      .add_option("--volume-claim", args->job.volume_claim,
+                  "Kubernetes: the PersistentVolumeClaim holding the sessions")
       ->capture_default_str();
   dispatch.On(&command, [args](Io& io) {
     const std::vector<BatchItem> items = BatchItems(*args);

@@ -106,8 +106,8 @@ std::vector<BatchItem> ReadCatalog(const std::filesystem::path& csv) {
     if (fields[0].empty()) throw FormatError(csv, where + "empty SKU");
     if (fields[1].empty()) throw FormatError(csv, where + "empty session folder");
     if (const auto it = seen.find(fields[0]); it != seen.end())
-      throw FormatError(csv, where + "SKU '" + fields[0] + "' is also on line " +
-                                 std::to_string(it->second));
+      throw FormatError(
+          csv, where + "SKU '" + fields[0] + "' is also on line " + std::to_string(it->second));
     seen[fields[0]] = number;
     std::filesystem::path session = fields[1];
     if (session.is_relative()) session = csv.parent_path() / session;
@@ -259,14 +259,14 @@ std::string BatchTable(const std::vector<BatchRecord>& records) {
   for (const BatchRecord& r : records) sku_width = std::max(sku_width, r.sku.size());
   sku_width = std::min<std::size_t>(sku_width, 32);
   std::ostringstream out;
-  const auto row = [&](const std::string& sku, const std::string& status,
-                       const std::string& faces, const std::string& texture,
-                       const std::string& psnr, const std::string& seconds,
-                       const std::string& peak, const std::string& note) {
+  const auto row = [&](const std::string& sku, const std::string& status, const std::string& faces,
+                       const std::string& texture, const std::string& psnr,
+                       const std::string& seconds, const std::string& peak,
+                       const std::string& note) {
     out << std::left << std::setw(static_cast<int>(sku_width)) << sku.substr(0, sku_width) << "  "
-        << std::setw(9) << status << std::right << std::setw(7) << faces << std::setw(8)
-        << texture << std::setw(8) << psnr << std::setw(8) << seconds << std::setw(8) << peak
-        << "  " << note << '\n';
+        << std::setw(9) << status << std::right << std::setw(7) << faces << std::setw(8) << texture
+        << std::setw(8) << psnr << std::setw(8) << seconds << std::setw(8) << peak << "  " << note
+        << '\n';
   };
   row("SKU", "status", "faces", "texture", "PSNR", "time s", "peak MB", "");
   std::map<std::string, int> counts;
@@ -277,7 +277,8 @@ std::string BatchTable(const std::vector<BatchRecord>& records) {
     const bool ran = r.status == "done" || r.status == "failed";
     std::string note = r.error;
     if (note.size() > 100) note = note.substr(0, 97) + "...";
-    if (r.attempt > 0) note = "attempt " + std::to_string(r.attempt + 1) + (note.empty() ? "" : "; ") + note;
+    if (r.attempt > 0)
+      note = "attempt " + std::to_string(r.attempt + 1) + (note.empty() ? "" : "; ") + note;
     row(r.sku, r.status, r.faces > 0 ? std::to_string(r.faces) : "-",
         r.texture_size > 0 ? std::to_string(r.texture_size) : "-",
         r.held_out_psnr_db ? Fixed(*r.held_out_psnr_db, 2) : "-", ran ? Fixed(r.seconds, 1) : "-",
@@ -293,8 +294,7 @@ bool BatchExitIsFinal(int exit_code) {
   return exit_code == 0 || exit_code == 64 || exit_code == 65 || exit_code == 74;
 }
 
-std::string SbatchScript(const std::filesystem::path& folder, int count,
-                         const BatchJobOptions& o) {
+std::string SbatchScript(const std::filesystem::path& folder, int count, const BatchJobOptions& o) {
   CAROUSEL_THROW_IF(count < 1, InvalidArgument, "a batch job needs at least one task");
   std::ostringstream s;
   s << "#!/bin/bash\n"

@@ -5,6 +5,8 @@
 // complete and byte-identical to a local batch run with another thread count.
 #include "carousel/studio/batch.h"
 
+#include <unistd.h>
+
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -43,10 +45,10 @@ std::filesystem::path CapturedSessions() {
     const char* scenes[] = {"shoe", "bottle", "avocado", "duck", "bottle", "shoe"};
     for (int i = 0; i < 6; ++i) {
       const std::string size = i == 0 ? "--views 10 --size 480x320" : "--views 6 --size 300x200";
-      const testing::ShellResult r = RunShell(
-          Carousel() + " sim capture --out " + Quote(folder / SessionName(i)) +
-          " --data " + Quote(testing::SharedDataDir()) + " --scene " + scenes[i] + " " + size +
-          " --seed " + std::to_string(i) + " --product SKU-" + std::to_string(i));
+      const testing::ShellResult r =
+          RunShell(Carousel() + " sim capture --out " + Quote(folder / SessionName(i)) +
+                   " --data " + Quote(testing::SharedDataDir()) + " --scene " + scenes[i] + " " +
+                   size + " --seed " + std::to_string(i) + " --product SKU-" + std::to_string(i));
       if (r.code != 0) throw IoError(folder, "sim capture failed: " + r.out);
     }
   });
@@ -114,9 +116,9 @@ TEST(BatchTest, KubernetesManifestIsAnIndexedJobAYamlParserReads) {
   options.process_args = {"--faces", "5000"};
   testing::WriteBytes(dir / "job.yaml",
                       KubernetesManifest("/studio/batches/spring", items, options));
-  const testing::ShellResult parsed =
-      RunShell("python3 -c 'import json, sys, yaml; print(json.dumps(yaml.safe_load(open(sys.argv[1]))))' " +
-               Quote(dir / "job.yaml"));
+  const testing::ShellResult parsed = RunShell(
+      "python3 -c 'import json, sys, yaml; print(json.dumps(yaml.safe_load(open(sys.argv[1]))))' " +
+      Quote(dir / "job.yaml"));
   ASSERT_EQ(parsed.code, 0) << parsed.out;
   const json job = json::parse(parsed.out);
   EXPECT_EQ(job.at("apiVersion"), "batch/v1");
@@ -130,9 +132,8 @@ TEST(BatchTest, KubernetesManifestIsAnIndexedJobAYamlParserReads) {
             json::array({64, 65, 74}));
   const json& container = spec.at("template").at("spec").at("containers").at(0);
   EXPECT_EQ(container.at("image"), "registry.example/carousel:1.2");
-  EXPECT_EQ(container.at("command"),
-            json::array({"carousel", "--threads", "4", "batch", "task", "/studio/batches/spring",
-                         "--faces", "5000"}));
+  EXPECT_EQ(container.at("command"), json::array({"carousel", "--threads", "4", "batch", "task",
+                                                  "/studio/batches/spring", "--faces", "5000"}));
   EXPECT_EQ(container.at("resources").at("limits").at("memory"), "3000Mi");
   // One volume holds the batch folder and every session, at their own paths.
   EXPECT_EQ(container.at("volumeMounts").at(0).at("mountPath"), "/studio");
@@ -146,8 +147,8 @@ TEST(BatchTest, LocalBatchGoesOnPastACorruptSessionAndNamesItsError) {
   const auto photo = sessions[1] / "images" / "cam0_stop02.jpg";
   const std::string bytes = testing::ReadBytes(photo);
   testing::WriteBytes(photo, bytes.substr(0, bytes.size() / 4));
-  const testing::ShellResult run = RunShell(Carousel() + " batch --no-publish --out " +
-                                            Quote(dir / "batch") + Joined(sessions));
+  const testing::ShellResult run =
+      RunShell(Carousel() + " batch --no-publish --out " + Quote(dir / "batch") + Joined(sessions));
   EXPECT_EQ(run.code, 1) << run.out;
   EXPECT_THAT(run.out, ::testing::HasSubstr("SKU-1  failed"));
   const json summary = Summary(dir / "batch");
@@ -184,8 +185,12 @@ std::string JobId(const std::string& out) {
 // The test's own Slurm cluster, stopped however the test ends.
 class SlurmCluster {
  public:
+  // Ports of its own (this process's), so that a cluster left behind by a killed run, or
+  // another build's test, is never in the way.
   explicit SlurmCluster(const std::filesystem::path& folder) : folder_(folder) {
-    const testing::ShellResult r = RunShell(Script() + " start " + Quote(folder_));
+    const int port = 20000 + 2 * static_cast<int>(::getpid() % 5000);
+    const testing::ShellResult r = RunShell("CAROUSEL_SLURM_PORT=" + std::to_string(port) + " " +
+                                            Script() + " start " + Quote(folder_));
     started_ = r.code == 0;
     output_ = r.out;
   }
@@ -234,7 +239,7 @@ TEST(BatchTest, SlurmJobArraySurvivesACancelledTaskAndMatchesALocalBatchByteForB
 
   // Task 0 (the largest session) cancelled once it is well into its reconstruction.
   bool cancelled = false;
-  for (int i = 0; i < 600 && !cancelled; ++i) {
+  for (int i = 0; i < 1800 && !cancelled; ++i) {
     const testing::ShellResult queue = slurm.Run("squeue -h -r -j " + job_id + " -o '%i %T'");
     const bool running = queue.out.find(job_id + "_0 RUNNING") != std::string::npos;
     std::error_code ec;
@@ -268,8 +273,8 @@ TEST(BatchTest, SlurmJobArraySurvivesACancelledTaskAndMatchesALocalBatchByteForB
   for (int i = 0; i < 6; ++i) {
     EXPECT_EQ(summary[i].at("status"), "done") << summary[i];
     EXPECT_EQ(summary[i].at("job"), second_id + "_" + std::to_string(i)) << summary[i];
-    EXPECT_EQ(summary[i].at("stages"), i == 0 ? "reconstruct ran, texture ran"
-                                              : "reconstruct current, texture current")
+    EXPECT_EQ(summary[i].at("stages"),
+              i == 0 ? "reconstruct ran, texture ran" : "reconstruct current, texture current")
         << summary[i];
   }
   // Per-task logs beside each session: both attempts of the cancelled one.

@@ -53,8 +53,8 @@ struct BatchRecord {
   double peak_mb = 0.0;  // its peak resident memory
   int attempt = 0;       // 0 first, 1 after one requeue, ...
   std::string host;
-  int pid = 0;      // the task's process on `host`
-  std::string job;  // the scheduler's task id ("12_3"), empty for a local batch
+  int pid = 0;         // the task's process on `host`
+  std::string job;     // the scheduler's task id ("12_3"), empty for a local batch
   std::string stages;  // "reconstruct ran, texture ran, publish current"
 };
 
@@ -75,7 +75,8 @@ std::filesystem::path BatchResultFile(const std::filesystem::path& folder, int t
 BatchRecord ReadBatchResult(const std::filesystem::path& folder, int task, const BatchItem& item);
 
 // summary.csv and summary.json in `folder`, atomically. \throw IoError.
-void WriteBatchSummary(const std::filesystem::path& folder, const std::vector<BatchRecord>& records);
+void WriteBatchSummary(const std::filesystem::path& folder,
+                       const std::vector<BatchRecord>& records);
 // A table for the terminal: one row per task and a totals line.
 std::string BatchTable(const std::vector<BatchRecord>& records);
 
