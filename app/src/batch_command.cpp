@@ -15,6 +15,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -318,6 +319,35 @@ pid_t SpawnTask(const BatchArgs& args, const std::filesystem::path& folder, int 
   return pid;
 }
 
+// Ctrl-C or SIGTERM during a local batch: no new task starts, the running ones are asked to
+// stop (SIGINT: `process` cancels at its next step), and the summary is still written.
+volatile std::sig_atomic_t g_batch_interrupt = 0;
+
+extern "C" void OnBatchInterrupt(int signal_number) { g_batch_interrupt = signal_number; }
+
+// The handlers for the duration of a local batch (without SA_RESTART, so that wait4 returns).
+class BatchInterruptScope {
+ public:
+  BatchInterruptScope() {
+    g_batch_interrupt = 0;
+    struct sigaction action {};
+    action.sa_handler = OnBatchInterrupt;
+    sigemptyset(&action.sa_mask);
+    ::sigaction(SIGINT, &action, &previous_int_);
+    ::sigaction(SIGTERM, &action, &previous_term_);
+  }
+  ~BatchInterruptScope() {
+    ::sigaction(SIGINT, &previous_int_, nullptr);
+    ::sigaction(SIGTERM, &previous_term_, nullptr);
+  }
+  BatchInterruptScope(const BatchInterruptScope&) = delete;
+  BatchInterruptScope& operator=(const BatchInterruptScope&) = delete;
+
+ private:
+  struct sigaction previous_int_ {};
+  struct sigaction previous_term_ {};
+};
+
 // The sessions N at a time in child processes; every record into the summary.
 int RunLocal(const BatchArgs& args, const std::vector<BatchItem>& items, Io& io) {
   const std::filesystem::path folder = std::filesystem::absolute(args.out);
@@ -353,11 +383,22 @@ int RunLocal(const BatchArgs& args, const std::vector<BatchItem>& items, Io& io)
   int next = 0;
   int finished = 0;
   Stopwatch watch;
-  while (next < count || !running.empty()) {
-    while (next < count && static_cast<int>(running.size()) < jobs) {
+  const BatchInterruptScope interrupt_scope;
+  bool stopping = false;
+  while ((next < count && !stopping) || !running.empty()) {
+    if (g_batch_interrupt != 0 && !stopping) {
+      stopping = true;
+      io.out << "batch: " << strsignal(g_batch_interrupt) << "; stopping " << running.size()
+             << (running.size() == 1 ? " running task" : " running tasks") << ", " << count - next
+             << " not started\n"
+             << std::flush;
+      for (const auto& [child, task] : running) ::kill(child, SIGINT);
+    }
+    while (next < count && !stopping && static_cast<int>(running.size()) < jobs) {
       running[SpawnTask(args, folder, next, threads)] = next;
       ++next;
     }
+    if (running.empty()) continue;
     int status = 0;
     rusage usage{};
     const pid_t pid = ::wait4(-1, &status, 0, &usage);
@@ -371,7 +412,11 @@ int RunLocal(const BatchArgs& args, const std::vector<BatchItem>& items, Io& io)
     running.erase(it);
     BatchRecord record = studio::ReadBatchResult(folder, task, items[task]);
     record.peak_mb = std::max(record.peak_mb, static_cast<double>(usage.ru_maxrss) / 1024.0);
-    if (WIFSIGNALED(status)) {
+    if (stopping && (WIFSIGNALED(status) || WEXITSTATUS(status) == kExitCancelled)) {
+      record.status = "cancelled";
+      record.exit_code = kExitCancelled;
+      record.error = "stopped by the interrupted batch";
+    } else if (WIFSIGNALED(status)) {
       record.status = "failed";
       record.exit_code = 128 + WTERMSIG(status);
       record.error = std::string("killed by signal ") + strsignal(WTERMSIG(status));
@@ -394,11 +439,23 @@ int RunLocal(const BatchArgs& args, const std::vector<BatchItem>& items, Io& io)
     }
     io.out << '\n' << std::flush;
   }
+  for (int task = next; task < count; ++task) {
+    BatchRecord& record = records[static_cast<std::size_t>(task)];
+    record = studio::ReadBatchResult(folder, task, items[static_cast<std::size_t>(task)]);
+    record.status = "cancelled";
+    record.error = "not started: the batch was interrupted";
+    WriteRecord(folder, record);
+  }
   studio::WriteBatchSummary(folder, records);
   io.out << studio::BatchTable(records) << "wall time "
          << static_cast<int>(watch.ElapsedSeconds() * 10) / 10.0
          << " s; summary: " << (folder / "summary.csv").string() << ", "
          << (folder / "summary.json").string() << '\n';
+  if (stopping) {
+    io.out << "batch interrupted: the same command goes on where it stopped (finished stages are "
+              "kept)\n";
+    return kExitCancelled;
+  }
   const bool all_done = std::all_of(records.begin(), records.end(),
                                     [](const BatchRecord& r) { return r.status == "done"; });
   return all_done ? kExitOk : kExitFailure;

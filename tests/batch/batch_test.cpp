@@ -1,10 +1,12 @@
 // carousel batch: the catalog, the Kubernetes manifest (parsed by a real YAML parser), a local
 // batch going on past a corrupt session, and a Slurm job array on a real single-node cluster
 // (Debian's slurmctld, slurmd and munge, started in a temporary folder by tests/batch/
-// slurm-cluster) with one task cancelled mid-way and the batch resubmitted: every session ends
-// complete and byte-identical to a local batch run with another thread count.
+// slurm-cluster) with one task killed (and requeued), then cancelled mid-way, and the batch
+// resubmitted: every session ends complete and byte-identical to a local batch run with another
+// thread count. A local batch interrupted by Ctrl-C writes its summary and goes on when rerun.
 #include "carousel/studio/batch.h"
 
+#include <signal.h>
 #include <unistd.h>
 
 #include <gmock/gmock.h>
@@ -174,6 +176,49 @@ TEST(BatchTest, LocalBatchGoesOnPastACorruptSessionAndNamesItsError) {
               ::testing::HasSubstr("truncated JPEG"));
 }
 
+// Ctrl-C (SIGINT to the batch alone, as `kill -INT` sends it) while the first task runs: the
+// running task is stopped, the others never start, the summary says so, nothing captured is
+// lost, and the same command then goes on to the end.
+TEST(BatchTest, LocalBatchInterruptedStopsItsTaskWritesTheSummaryAndGoesOnWhenRerun) {
+  TempDir dir;
+  std::vector<std::filesystem::path> sessions = CopySessions(dir / "sessions");
+  sessions.resize(3);
+  const std::string batch =
+      Carousel() + " batch --no-publish --jobs 1 --out " + Quote(dir / "batch") + Joined(sessions);
+  const std::string log = Quote(sessions[0] / "batch.log");
+  const testing::ShellResult run =
+      RunShell(batch + " & pid=$!; for i in $(seq 3000); do grep -qs silhouettes " + log +
+               " && break; sleep 0.1; done; kill -INT $pid; wait $pid; echo \"exit code $?\"");
+  EXPECT_THAT(run.out, ::testing::HasSubstr("exit code 130")) << run.out;
+  EXPECT_THAT(run.out, ::testing::HasSubstr("stopping 1 running task, 2 not started"));
+  const json summary = Summary(dir / "batch");
+  ASSERT_EQ(summary.size(), 3u);
+  EXPECT_EQ(summary[0].at("status"), "cancelled") << summary[0];
+  EXPECT_EQ(summary[0].at("exit_code"), 130) << summary[0];
+  for (int i : {1, 2}) {
+    EXPECT_EQ(summary[i].at("status"), "cancelled") << summary[i];
+    EXPECT_EQ(summary[i].at("error"), "not started: the batch was interrupted");
+    EXPECT_FALSE(std::filesystem::exists(sessions[i] / "batch.log"));
+  }
+  // The task's process is gone, and every photo is still the one captured.
+  const int pid = summary[0].at("pid").get<int>();
+  ASSERT_GT(pid, 0);
+  EXPECT_NE(::kill(pid, 0), 0) << "task 0 (pid " << pid << ") still runs";
+  for (const auto& entry : std::filesystem::directory_iterator(sessions[0] / "images")) {
+    const auto original = CapturedSessions() / "s0" / "images" / entry.path().filename();
+    EXPECT_TRUE(testing::ReadBytes(entry.path()) == testing::ReadBytes(original)) << entry.path();
+  }
+  EXPECT_FALSE(std::filesystem::exists(sessions[0] / "model" / "model.glb"));
+
+  const testing::ShellResult again = RunShell(batch);
+  EXPECT_EQ(again.code, 0) << again.out;
+  const json after = Summary(dir / "batch");
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_EQ(after[i].at("status"), "done") << after[i];
+    EXPECT_TRUE(std::filesystem::exists(sessions[i] / "model" / "model.glb"));
+  }
+}
+
 // The job id `carousel batch --slurm` printed on its last line ("job 12").
 std::string JobId(const std::string& out) {
   const auto at = out.rfind("\njob ");
@@ -214,7 +259,7 @@ class SlurmCluster {
   std::string output_;
 };
 
-TEST(BatchTest, SlurmJobArraySurvivesACancelledTaskAndMatchesALocalBatchByteForByte) {
+TEST(BatchTest, SlurmJobArrayRequeuesAKilledTaskSurvivesACancelledOneAndMatchesALocalBatch) {
   TempDir dir;
   const std::vector<std::filesystem::path> local = CopySessions(dir / "local");
   const std::vector<std::filesystem::path> cluster = CopySessions(dir / "cluster");
@@ -237,27 +282,57 @@ TEST(BatchTest, SlurmJobArraySurvivesACancelledTaskAndMatchesALocalBatchByteForB
               ::testing::AllOf(::testing::HasSubstr("#SBATCH --array=0-5%2"),
                                ::testing::HasSubstr("#SBATCH --requeue")));
 
-  // Task 0 (the largest session) cancelled once it is well into its reconstruction.
-  bool cancelled = false;
-  for (int i = 0; i < 1800 && !cancelled; ++i) {
-    const testing::ShellResult queue = slurm.Run("squeue -h -r -j " + job_id + " -o '%i %T'");
-    const bool running = queue.out.find(job_id + "_0 RUNNING") != std::string::npos;
+  // Task 0 (the largest session), once it is well into its reconstruction: its process killed
+  // (a crash, which the job script requeues), then, on its second attempt, cancelled.
+  const auto working = [&](int attempt) {
     std::error_code ec;
-    const bool working =
-        std::filesystem::exists(cluster[0] / "batch.log", ec) &&
-        testing::ReadBytes(cluster[0] / "batch.log").find("silhouettes") != std::string::npos;
-    if (running && working) {
+    if (!std::filesystem::exists(cluster[0] / "batch.log", ec)) return false;
+    const std::string log = testing::ReadBytes(cluster[0] / "batch.log");
+    const auto at = log.find("attempt " + std::to_string(attempt) + " on");
+    return at != std::string::npos && log.find("silhouettes", at) != std::string::npos;
+  };
+  bool killed = false;
+  for (int i = 0; i < 1800 && !killed; ++i) {
+    if (working(1)) {
+      const json record = json::parse(testing::ReadBytes(dir / "batch" / "results" / "0.json"));
+      ASSERT_EQ(record.at("status"), "running") << record;
+      ASSERT_EQ(::kill(record.at("pid").get<int>(), SIGKILL), 0);
+      killed = true;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  ASSERT_TRUE(killed) << "task 0 never ran";
+  // Slurm holds a requeued job back for a while (its BeginTime, ~2 minutes); the test's
+  // administrator lets it go at once.
+  bool pending = false;
+  for (int i = 0; i < 600 && !pending; ++i) {
+    const testing::ShellResult queue = slurm.Run("squeue -h -r -j " + job_id + " -o '%i %T'");
+    pending = queue.out.find(job_id + "_0 PENDING") != std::string::npos;
+    if (!pending) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  ASSERT_TRUE(pending) << "task 0 was not requeued: "
+                       << testing::ReadBytes(dir / "batch" / "logs" / "task-0.out");
+  const testing::ShellResult release =
+      slurm.Run("scontrol update JobId=" + job_id + "_0 StartTime=now");
+  ASSERT_EQ(release.code, 0) << release.out;
+  bool cancelled = false;
+  for (int i = 0; i < 3000 && !cancelled; ++i) {
+    const testing::ShellResult queue = slurm.Run("squeue -h -r -j " + job_id + " -o '%i %T'");
+    if (queue.out.find(job_id + "_0 RUNNING") != std::string::npos && working(2)) {
       ASSERT_EQ(slurm.Run("scancel " + job_id + "_0").code, 0);
       cancelled = true;
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
-  ASSERT_TRUE(cancelled) << "task 0 never ran";
+  ASSERT_TRUE(cancelled) << "the requeued task 0 never ran";
+  EXPECT_THAT(testing::ReadBytes(dir / "batch" / "logs" / "task-0.out"),
+              ::testing::HasSubstr("task 0 failed with exit code 137; requeued (restart 1 of 2)"));
   const testing::ShellResult after_cancel =
       slurm.Run(Carousel() + " batch status --wait --timeout 900 " + Quote(dir / "batch"));
   EXPECT_EQ(after_cancel.code, 1) << after_cancel.out;  // not every session is complete
   json summary = Summary(dir / "batch");
   EXPECT_EQ(summary[0].at("status"), "cancelled") << summary[0];
+  EXPECT_EQ(summary[0].at("attempt"), 1) << summary[0];
   for (int i = 1; i < 6; ++i) EXPECT_EQ(summary[i].at("status"), "done") << summary[i];
   EXPECT_FALSE(std::filesystem::exists(cluster[0] / "model" / "model.glb"));
 
