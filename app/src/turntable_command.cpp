@@ -29,7 +29,8 @@ void PrintStatus(rig::SerialTurntable& table, std::ostream& out) {
   out << std::fixed << std::setprecision(3) << "angle " << Degrees(status.angle_rad) << " deg ("
       << raw.position << " microsteps), target " << Degrees(status.target_rad) << " deg, "
       << (status.moving ? "moving" : "at rest") << ", " << (status.homed ? "homed" : "not homed")
-      << ", driver " << ((raw.flags & CP_FLAG_ENABLED) ? "enabled" : "disabled") << ", sensor "
+      << ", backlight " << (status.backlight ? "on" : "off") << ", driver "
+      << ((raw.flags & CP_FLAG_ENABLED) ? "enabled" : "disabled") << ", sensor "
       << ((raw.flags & CP_FLAG_SENSOR) ? "active" : "clear") << ", fault "
       << (status.fault.empty() ? "none" : status.fault) << ", frames dropped by the controller "
       << raw.dropped_frames << '\n';
@@ -74,6 +75,10 @@ int RunTurntable(const TurntableArgs& args, std::ostream& out, std::ostream& /*e
                   static_cast<std::uint16_t>(args.duration_ms));
     out << (args.focus ? "focus" : "shutter") << " outputs " << static_cast<int>(mask) << " on for "
         << args.duration_ms << " ms\n";
+  } else if (args.action == "backlight") {
+    if (args.on && args.off) throw InvalidArgument("backlight: --on or --off, not both");
+    if (args.on || args.off) table.SetBacklight(args.on);
+    out << "backlight " << (table.Status().backlight ? "on" : "off") << '\n';
   } else if (args.action == "config") {
     cp_config c = table.Config();
     bool changed = false;
@@ -105,7 +110,7 @@ int RunTurntable(const TurntableArgs& args, std::ostream& out, std::ostream& /*e
     PrintConfig(c, out);
   } else {
     throw InvalidArgument("turntable: unknown action '" + args.action +
-                          "' (identify, home, goto, status, trigger, config)");
+                          "' (identify, home, goto, status, trigger, backlight, config)");
   }
   return 0;
 }
@@ -137,7 +142,9 @@ int RunSimTurntable(const SimTurntableArgs& args, std::ostream& out, std::ostrea
 void AddTurntableCommand(CLI::App& command, Dispatch& dispatch) {
   auto args = std::make_shared<TurntableArgs>();
   command.add_option("--port", args->port, "serial port, e.g. /dev/ttyACM0")->required();
-  command.add_option("action", args->action, "identify, home, goto, status, trigger or config")
+  command
+      .add_option("action", args->action,
+                  "identify, home, goto, status, trigger, backlight or config")
       ->required();
   command.add_option("degrees", args->degrees, "goto: absolute table angle");
   command.add_option("--timeout", args->timeout_s, "home/goto timeout, seconds")
@@ -147,6 +154,8 @@ void AddTurntableCommand(CLI::App& command, Dispatch& dispatch) {
       ->capture_default_str();
   command.add_flag("--focus", args->focus, "trigger: focus instead of shutter");
   command.add_option("--ms", args->duration_ms, "trigger: pulse length, ms")->capture_default_str();
+  command.add_flag("--on", args->on, "backlight: switch it on");
+  command.add_flag("--off", args->off, "backlight: switch it off");
   command.add_option("--steps-per-rev", args->steps_per_rev, "config: motor steps");
   command.add_option("--microsteps", args->microsteps, "config: microstepping");
   command.add_option("--gear", args->gear, "config: NUM:DEN, table revs = motor revs x DEN / NUM");

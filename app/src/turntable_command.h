@@ -13,11 +13,12 @@ namespace carousel::app {
 
 struct TurntableArgs {
   std::string port;
-  std::string action;              // identify, home, goto, status, trigger, config
+  std::string action;              // identify, home, goto, status, trigger, backlight, config
   double degrees = 0.0;            // goto: absolute table angle
   std::vector<int> cameras = {0};  // trigger: camera outputs 0..3
   bool focus = false;              // trigger: focus outputs instead of shutters
   int duration_ms = 100;           // trigger
+  bool on = false, off = false;    // backlight: switch it on / off (neither: report it)
   double timeout_s = 60.0;         // home / goto
   // config: values to change (unset: keep).
   std::optional<int> steps_per_rev, microsteps, max_speed, acceleration, homing_speed, backlash;

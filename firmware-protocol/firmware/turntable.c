@@ -1,6 +1,6 @@
 /* Carousel turntable controller firmware: ATmega328P at 16 MHz, a STEP/DIR stepper driver,
- * a home sensor and camera shutter/focus outputs, driven over the UART with the protocol of
- * firmware-protocol/PROTOCOL.md (carousel_protocol is compiled in).
+ * a home sensor, camera shutter/focus outputs and the backlight output, driven over the UART with
+ * the protocol of firmware-protocol/PROTOCOL.md (carousel_protocol is compiled in).
  *
  * Timer 1 (CTC, 2 MHz) generates the steps: each compare match is one step, and the ISR
  * computes the next interval from a trapezoidal profile exact in distance
@@ -21,7 +21,7 @@
 #include "carousel/protocol/protocol.h"
 
 #define FW_MAJOR 1
-#define FW_MINOR 0
+#define FW_MINOR 1
 #define FW_PATCH 0
 #define MODEL "Carousel TT-328"
 
@@ -34,6 +34,7 @@
 #define HOME_BIT (1u << PB1)   /* active low, pull-up */
 #define FOCUS_C_BITS ((1u << PC4) | (1u << PC5))
 #define FOCUS_D_BITS ((1u << PD6) | (1u << PD7))
+#define BACKLIGHT_BIT (1u << PB4) /* active high: the backlight panel's driver */
 
 /* The reset cause, read before anything clears it. */
 static uint8_t reset_cause __attribute__((section(".noinit")));
@@ -302,6 +303,7 @@ static void fill_status(cp_frame* f) {
   if (phase == HOME_SEEK || phase == HOME_RELEASE) s.flags |= CP_FLAG_HOMING;
   if (sensor_active()) s.flags |= CP_FLAG_SENSOR;
   if (hold) s.flags |= CP_FLAG_HOLD;
+  if (PORTB & BACKLIGHT_BIT) s.flags |= CP_FLAG_BACKLIGHT;
   s.fault = fault;
   cp_put_status(f, &s);
 }
@@ -490,6 +492,15 @@ static int execute(const cp_frame* cmd, cp_frame* reply) {
       trigger(&t);
       return CP_OK;
     }
+    case CP_LIGHT:
+      /* Lights switch at once, moving or not (a mask shot is taken at rest anyway). */
+      if (cmd->len < 1) return CP_ERR_LENGTH;
+      if (cmd->payload[0] & (uint8_t)~CP_LIGHT_ALL) return CP_ERR_RANGE;
+      if (cmd->payload[0] & CP_LIGHT_BACKLIGHT)
+        PORTB |= BACKLIGHT_BIT;
+      else
+        PORTB &= (uint8_t)~BACKLIGHT_BIT;
+      break;
     case CP_ENABLE:
       if (cmd->len < 1) return CP_ERR_LENGTH;
       hold = cmd->payload[0] ? 1u : 0u;
@@ -536,8 +547,9 @@ int main(void) {
   uint8_t byte;
   /* The driver's /ENABLE has a pull-up: drive it high before it becomes an output, so the
    * driver is never enabled, not even for a cycle, at reset. */
-  PORTB |= ENABLE_BIT | HOME_BIT; /* HOME_BIT: the sensor input's pull-up */
-  DDRB |= ENABLE_BIT;
+  PORTB |= ENABLE_BIT | HOME_BIT;   /* HOME_BIT: the sensor input's pull-up */
+  PORTB &= (uint8_t)~BACKLIGHT_BIT; /* the backlight starts off (after any reset) */
+  DDRB |= ENABLE_BIT | BACKLIGHT_BIT;
   PORTD &= (uint8_t) ~(STEP_BIT | DIR_BIT | FOCUS_D_BITS);
   DDRD |= STEP_BIT | DIR_BIT | FOCUS_D_BITS;
   PORTC &= (uint8_t) ~(0x0Fu | FOCUS_C_BITS);

@@ -298,6 +298,8 @@ const char* cp_type_name(uint8_t type) {
       return "TRIGGER";
     case CP_ENABLE:
       return "ENABLE";
+    case CP_LIGHT:
+      return "LIGHT";
     case CP_EVENT_BOOT:
       return "BOOT";
     case CP_EVENT_MOVE_DONE:

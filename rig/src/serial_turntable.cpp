@@ -56,6 +56,7 @@ void SerialTurntable::Handshake() {
     throw ProtocolError(options_.port + ": controller speaks protocol " +
                         std::to_string(reply.len >= 1 ? reply.payload[0] : 0) + ".x, host " +
                         std::to_string(CP_VERSION_MAJOR) + ".x");
+  controller_minor_ = reply.payload[1];
   const cp_frame config = ExchangeLocked(Command(CP_GET_CONFIG));
   if (cp_get_config(&config, &config_) != CP_OK)
     throw ProtocolError(options_.port + ": the controller reported an invalid configuration");
@@ -167,6 +168,7 @@ TurntableStatus SerialTurntable::Status() {
   status.target_rad = AngleFromSteps(raw.target);
   status.moving = (raw.flags & CP_FLAG_MOVING) != 0;
   status.homed = (raw.flags & CP_FLAG_HOMED) != 0;
+  status.backlight = (raw.flags & CP_FLAG_BACKLIGHT) != 0;
   switch (raw.fault) {
     case CP_FAULT_NONE:
       break;
@@ -262,6 +264,25 @@ void SerialTurntable::Trigger(std::uint8_t cameras, std::uint8_t outputs,
   if (cp_get_trigger(&f, &check) != CP_OK)
     throw InvalidArgument("trigger: cameras 0..3, shutter and/or focus, 1..10000 ms");
   Exchange(f);
+}
+
+void SerialTurntable::SetBacklight(bool on) {
+  {
+    std::lock_guard lock(mutex_);
+    if (controller_minor_ < 1)
+      throw DeviceError(options_.port, "the controller's firmware speaks protocol 1." +
+                                           std::to_string(controller_minor_) +
+                                           ", which has no backlight output (LIGHT needs 1.1): "
+                                           "update the firmware");
+  }
+  cp_frame f = Command(CP_LIGHT);
+  f.payload[0] = on ? CP_LIGHT_BACKLIGHT : 0;
+  f.len = 1;
+  const cp_frame reply = Exchange(f);
+  cp_status status{};
+  if (cp_get_status(&reply, &status) != CP_OK || ((status.flags & CP_FLAG_BACKLIGHT) != 0) != on)
+    throw DeviceError(options_.port,
+                      std::string("the backlight did not switch ") + (on ? "on" : "off"));
 }
 
 void SerialTurntable::SetHold(bool hold) {

@@ -32,10 +32,11 @@ namespace carousel::sim {
 namespace {
 
 // Pins (PROTOCOL.md section 6).
-constexpr std::uint8_t kStepBit = 1u << 2;    // PD2
-constexpr std::uint8_t kDirBit = 1u << 5;     // PD5
-constexpr std::uint8_t kEnableBit = 1u << 0;  // PB0, active low, external pull-up
-constexpr int kHomePin = 1;                   // PB1, active low
+constexpr std::uint8_t kStepBit = 1u << 2;       // PD2
+constexpr std::uint8_t kDirBit = 1u << 5;        // PD5
+constexpr std::uint8_t kEnableBit = 1u << 0;     // PB0, active low, external pull-up
+constexpr int kHomePin = 1;                      // PB1, active low
+constexpr std::uint8_t kBacklightBit = 1u << 4;  // PB4, active high, pull-down on the board
 // Instructions per batch between looks at the PTY.
 constexpr int kBatch = 4000;
 
@@ -82,6 +83,7 @@ struct AvrTurntable::State {
   // Pins.
   std::uint8_t port_b = 0, ddr_b = 0, port_c = 0, port_d = 0, ddr_d = 0;
   bool enabled = false;
+  bool backlight = false;
   std::int64_t motor_steps = 0;
   bool sensor = false;
   std::vector<StepEdge> steps;
@@ -104,6 +106,12 @@ struct AvrTurntable::State {
       enabled = now;
       enable_changes.push_back({avr->cycle, now});
     }
+  }
+  // The backlight's driver: an input pin leaves it to the board's pull-down (off).
+  void UpdateBacklight() {
+    const bool now = (ddr_b & kBacklightBit) != 0 && (port_b & kBacklightBit) != 0;
+    RecordOutput(kBacklightOutput, backlight, now);
+    backlight = now;
   }
   void UpdateSensor() {
     const std::int64_t at = Modulo(options.start_position + motor_steps, options.steps_per_rev);
@@ -376,6 +384,7 @@ AvrTurntable::AvrTurntable(const AvrTurntableOptions& options) : state_(std::mak
         State& st = *StateOf(param);
         st.port_b = static_cast<std::uint8_t>(value);
         st.UpdateEnable();
+        st.UpdateBacklight();
       },
       self);
   avr_irq_register_notify(
@@ -384,6 +393,7 @@ AvrTurntable::AvrTurntable(const AvrTurntableOptions& options) : state_(std::mak
         State& st = *StateOf(param);
         st.ddr_b = static_cast<std::uint8_t>(value);
         st.UpdateEnable();
+        st.UpdateBacklight();
       },
       self);
   avr_irq_register_notify(
@@ -445,6 +455,7 @@ void AvrTurntable::Reset(std::uint8_t mcusr) {
   s.UpdateEnable();
   for (auto& p : s.pulses)
     if (p.end_cycle == 0) p.end_cycle = s.avr->cycle;
+  s.backlight = false;
   s.to_avr.clear();
   s.xoff = true;
   // The sensor's level is the board's, not the MCU's.
@@ -486,6 +497,11 @@ std::int64_t AvrTurntable::motor_steps() const {
 std::int64_t AvrTurntable::table_position() const {
   std::lock_guard lock(state_->mutex);
   return state_->options.start_position + state_->motor_steps;
+}
+
+bool AvrTurntable::backlight_on() const {
+  std::lock_guard lock(state_->mutex);
+  return state_->backlight;
 }
 
 bool AvrTurntable::sensor_active() const {

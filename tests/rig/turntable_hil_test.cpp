@@ -109,7 +109,7 @@ class TurntableHil : public ::testing::Test {
 TEST_F(TurntableHil, IdentifiesItself) {
   const rig::TurntableInfo info = table_->Identify();
   EXPECT_EQ(info.model, "Carousel TT-328");
-  EXPECT_NE(info.firmware.find("protocol 1.0"), std::string::npos) << info.firmware;
+  EXPECT_NE(info.firmware.find("protocol 1.1"), std::string::npos) << info.firmware;
   EXPECT_EQ(info.port, sim_->port());
   EXPECT_EQ(config_.backlash, 32);
   EXPECT_NEAR(table_->AngleFromSteps(9600), 2 * M_PI, 1e-12);
@@ -328,6 +328,52 @@ TEST_F(TurntableHil, TriggerPulsesTheChosenOutputsForTheirDuration) {
   EXPECT_THROW(table_->Trigger(0x10, CP_OUTPUT_SHUTTER, 10), InvalidArgument);
 }
 
+// The backlight output at pin level: off from reset, switched by LIGHT at once (moving or not),
+// reported in the status, untouched by a move and an emergency stop, off again after a reset.
+TEST_F(TurntableHil, BacklightSwitchesItsPinAndIsOffAfterEveryReset) {
+  EXPECT_FALSE(sim_->backlight_on());
+  EXPECT_FALSE(table_->Status().backlight);
+  for (const auto& p : sim_->output_pulses()) EXPECT_NE(p.output, sim::kBacklightOutput);
+  sim_->ClearLogs();
+  const std::uint64_t before_on = sim_->cycle();
+  table_->SetBacklight(true);
+  EXPECT_TRUE(sim_->backlight_on());  // switched by the time the ACK arrived
+  EXPECT_TRUE(table_->Status().backlight);
+  EXPECT_TRUE(table_->RawStatus().flags & CP_FLAG_BACKLIGHT);
+  // A move and an emergency stop leave it on; the light never blinks meanwhile.
+  table_->StartMoveToSteps(2000);
+  std::this_thread::sleep_for(milliseconds(20));
+  EXPECT_TRUE(sim_->backlight_on());
+  table_->Stop(/*emergency=*/true);
+  table_->WaitUntilStopped(kMoveTimeout);
+  EXPECT_TRUE(sim_->backlight_on());
+  table_->SetBacklight(false);
+  EXPECT_FALSE(sim_->backlight_on());
+  EXPECT_FALSE(table_->Status().backlight);
+  std::vector<sim::OutputPulse> light;
+  for (const auto& p : sim_->output_pulses())
+    if (p.output == sim::kBacklightOutput) light.push_back(p);
+  ASSERT_EQ(light.size(), 1u);  // one on-time: no glitch while moving or stopping
+  EXPECT_GT(light[0].start_cycle, before_on);
+  EXPECT_GT(light[0].end_cycle, light[0].start_cycle);
+  // Switching twice is idempotent: no second edge.
+  table_->SetBacklight(false);
+  const std::vector<sim::OutputPulse> after = sim_->output_pulses();
+  EXPECT_EQ(std::count_if(after.begin(), after.end(),
+                          [](const auto& p) { return p.output == sim::kBacklightOutput; }),
+            1);
+  // A reset (DTR) turns it off: the pin is an input until the firmware drives it low again.
+  table_->SetBacklight(true);
+  ASSERT_TRUE(sim_->backlight_on());
+  sim_->Reset(/*mcusr=*/2);
+  EXPECT_FALSE(sim_->backlight_on());
+  EXPECT_FALSE(table_->Status().backlight);  // the host shook hands again
+  EXPECT_FALSE(sim_->backlight_on());
+  table_->SetBacklight(true);
+  EXPECT_TRUE(sim_->backlight_on());
+  table_->SetBacklight(false);
+}
+
 TEST_F(TurntableHil, ConfigurationIsValidatedAndApplied) {
   cp_config c = config_;
   c.max_speed = 2000;
@@ -484,6 +530,20 @@ TEST(TurntableFirmware, VersionHandshakeAndIdempotentReplays) {
   reply = link.Exchange(Frame(0x3E, 9, {}));
   ASSERT_EQ(reply.type, CP_NAK);
   EXPECT_EQ(-static_cast<int>(reply.payload[1]), CP_ERR_UNKNOWN);
+  // LIGHT (1.1): lights the firmware does not have, and no payload, are refused; the pin
+  // stays as it was.
+  reply = link.Exchange(Frame(CP_LIGHT, 10, {0x02}));
+  ASSERT_EQ(reply.type, CP_NAK);
+  EXPECT_EQ(-static_cast<int>(reply.payload[1]), CP_ERR_RANGE);
+  reply = link.Exchange(Frame(CP_LIGHT, 11, {}));
+  ASSERT_EQ(reply.type, CP_NAK);
+  EXPECT_EQ(-static_cast<int>(reply.payload[1]), CP_ERR_LENGTH);
+  EXPECT_FALSE(sim.backlight_on());
+  reply = link.Exchange(Frame(CP_LIGHT, 12, {CP_LIGHT_BACKLIGHT}));
+  ASSERT_EQ(reply.type, CP_LIGHT | CP_ACK_FLAG);
+  ASSERT_EQ(cp_get_status(&reply, &status), CP_OK);
+  EXPECT_TRUE(status.flags & CP_FLAG_BACKLIGHT);
+  EXPECT_TRUE(sim.backlight_on());
 }
 
 TEST_F(TurntableHil, CorruptedAndLossyLineNeverMovesWrongOrTwice) {

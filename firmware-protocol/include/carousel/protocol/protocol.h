@@ -19,7 +19,7 @@ extern "C" {
 #endif
 
 #define CP_VERSION_MAJOR 1
-#define CP_VERSION_MINOR 0
+#define CP_VERSION_MINOR 1
 
 #define CP_MAX_PAYLOAD 32
 #define CP_HEADER_SIZE 3 /* type, seq, len */
@@ -58,6 +58,7 @@ enum {
   CP_SET_CONFIG = 0x0A,
   CP_TRIGGER = 0x0B,
   CP_ENABLE = 0x0C,
+  CP_LIGHT = 0x0D, /* since 1.1 */
   CP_EVENT_BOOT = 0x40,
   CP_EVENT_MOVE_DONE = 0x41,
   CP_EVENT_FAULT = 0x42,
@@ -72,13 +73,17 @@ enum {
   CP_FLAG_ENABLED = 0x04,
   CP_FLAG_HOMING = 0x08,
   CP_FLAG_SENSOR = 0x10,
-  CP_FLAG_HOLD = 0x20
+  CP_FLAG_HOLD = 0x20,
+  CP_FLAG_BACKLIGHT = 0x40 /* since 1.1 */
 };
 enum { CP_FAULT_NONE = 0, CP_FAULT_HOME_NOT_FOUND = 1, CP_FAULT_ESTOP = 2, CP_FAULT_WATCHDOG = 3 };
 /* MOVE_DONE reasons. */
 enum { CP_DONE_REACHED = 0, CP_DONE_STOPPED = 1, CP_DONE_ESTOP = 2, CP_DONE_HOMED = 3 };
 /* TRIGGER outputs. */
 enum { CP_OUTPUT_SHUTTER = 0x01, CP_OUTPUT_FOCUS = 0x02 };
+/* LIGHT's payload: the lights to switch on (the others go off). */
+enum { CP_LIGHT_BACKLIGHT = 0x01 };
+#define CP_LIGHT_ALL CP_LIGHT_BACKLIGHT
 
 #define CP_MAX_CAMERAS 4
 #define CP_MIN_STEP_RATE 32u     /* microsteps/s: one step interval fits timer 1 */

@@ -65,6 +65,8 @@ class SerialTurntable : public Turntable {
   void WaitUntilStopped(std::chrono::milliseconds timeout) override;
   TurntableStatus Status() override;
   void Stop(bool emergency) override;
+  // LIGHT (protocol 1.1): \throw DeviceError when the controller's firmware speaks 1.0.
+  void SetBacklight(bool on) override;
 
   // Protocol-level access (microsteps).
   cp_status RawStatus();
@@ -97,6 +99,7 @@ class SerialTurntable : public Turntable {
   mutable std::mutex mutex_;
   cp_decoder decoder_{};
   std::uint8_t next_seq_ = 1;
+  std::uint8_t controller_minor_ = 0;  // the protocol minor version the controller speaks
   cp_config config_{};
   std::uint32_t steps_per_rev_ = 0;
   bool needs_hello_ = true;

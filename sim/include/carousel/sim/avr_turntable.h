@@ -4,7 +4,8 @@
 // The harness plays the board around the ATmega328P (pins: firmware-protocol/PROTOCOL.md
 // section 6): it logs every STEP rising edge with the simulated cycle, the DIR level and
 // whether the driver was enabled (its /ENABLE has a pull-up, so an input pin reads as
-// disabled); it logs the /ENABLE level changes from reset and the shutter/focus pulses; it
+// disabled); it logs the /ENABLE level changes from reset, the shutter/focus pulses and the
+// backlight's on-times (an output like the others); it
 // models the turntable's home sensor (active while the table's position, modulo a
 // revolution, is in [0, width) steps); and it can corrupt, drop or delay bytes on the line
 // and unplug or re-plug the port. Times are simulated CPU cycles (16 MHz), never wall time.
@@ -52,8 +53,12 @@ struct EnableChange {
   bool enabled = false;
 };
 
+// The output the backlight (PB4) is logged as among the pulses.
+inline constexpr int kBacklightOutput = 8;
+
 struct OutputPulse {
-  int output = 0;  // 0..3 shutter of camera 0..3, 4..7 focus of camera 0..3
+  // 0..3 shutter of camera 0..3, 4..7 focus of camera 0..3, kBacklightOutput the backlight
+  int output = 0;
   std::uint64_t start_cycle = 0;
   std::uint64_t end_cycle = 0;  // 0 while still high
 };
@@ -107,6 +112,8 @@ class AvrTurntable {
   // The table position the sensor model sees: start_position + motor_steps().
   std::int64_t table_position() const;
   bool sensor_active() const;
+  // The backlight output's level (PB4 driven high; an input pin is off: the board's pull-down).
+  bool backlight_on() const;
 
   std::vector<StepEdge> steps() const;
   std::vector<EnableChange> enable_changes() const;

@@ -11,6 +11,8 @@
 #include <chrono>
 #include <string>
 
+#include "carousel/core/error.h"
+
 namespace carousel::rig {
 
 struct TurntableInfo {
@@ -24,7 +26,8 @@ struct TurntableStatus {
   double target_rad = 0.0;  // last commanded position
   bool moving = false;
   bool homed = false;
-  std::string fault;  // empty when healthy
+  bool backlight = false;  // the backlight output is on
+  std::string fault;       // empty when healthy
 };
 
 class Turntable {
@@ -46,6 +49,13 @@ class Turntable {
   virtual TurntableStatus Status() = 0;
   // Decelerates to a stop (emergency: at once).
   virtual void Stop(bool emergency) = 0;
+  // Switches the backlight (the panel behind the product and the light table under the plate,
+  // powered through the controller's light output) on or off; returns once it is switched.
+  // Mask shots are taken with it on: the product dark against a lit backdrop, whatever its
+  // colours. \throw DeviceError naming the port when the controller has no backlight output.
+  virtual void SetBacklight(bool /*on*/) {
+    throw DeviceError(Identify().port, "this turntable controller has no backlight output");
+  }
 };
 
 }  // namespace carousel::rig
