@@ -23,6 +23,8 @@ constexpr int kTileSize = 32;
 constexpr int kMaxSubdivision = 12;
 // Edges shorter than this on screen are never split, however much the lens bends them.
 constexpr double kMinSplitLengthPx = 0.25;
+// A backlit shot's plate (a light table) glows this fraction of the panel's level.
+constexpr float kPlateGlow = 0.95f;
 
 // ---- colour ---------------------------------------------------------------------------------
 
@@ -314,10 +316,144 @@ ContactShadowMap MakeContactShadowMap(const Scene& scene, double plate_radius, d
   return map;
 }
 
+// The key light's cast shadow: the object seen from the light (an orthographic map across the
+// light's direction) as a signed distance to its footprint, with the height (towards the light)
+// of the occluder at or nearest each cell. A receiver behind an occluder is shadowed with a
+// penumbra as wide as the light's apparent size makes it at that distance.
+struct CastShadowMap {
+  Eigen::Vector3f towards_light{0.0f, 0.0f, 1.0f};
+  Eigen::Vector3f axis_u{1.0f, 0.0f, 0.0f}, axis_v{0.0f, 1.0f, 0.0f};
+  float origin_u = 0.0f, origin_v = 0.0f, cell = 1.0f;
+  float tan_radius = 0.1f;
+  cv::Mat signed_distance;  // CV_32FC1, metres: > 0 outside the footprint, < 0 inside
+  cv::Mat occluder_height;  // CV_32FC1, metres along towards_light
+
+  // The fraction of the key light that `point` (world frame) does not see, 0..1.
+  float Occlusion(const Eigen::Vector3f& point) const {
+    const float u = (point.dot(axis_u) - origin_u) / cell;
+    const float v = (point.dot(axis_v) - origin_v) / cell;
+    if (!(u >= 0.0f && v >= 0.0f && u < signed_distance.cols && v < signed_distance.rows))
+      return 0.0f;
+    const int i = static_cast<int>(u), j = static_cast<int>(v);
+    constexpr float kBias = 0.002f;  // metres: a receiver touching its occluder is lit
+    const float gap = occluder_height.at<float>(j, i) - point.dot(towards_light);
+    if (!(gap > kBias)) return 0.0f;
+    const float half_width = std::max(cell, gap * tan_radius);
+    const float t = std::clamp((signed_distance.at<float>(j, i) + half_width) / (2.0f * half_width),
+                               0.0f, 1.0f);
+    return 1.0f - t * t * (3.0f - 2.0f * t);
+  }
+};
+
+CastShadowMap MakeCastShadowMap(const Scene& scene, const Eigen::Vector3f& towards_light,
+                                double light_size_deg) {
+  constexpr int kCells = 768;
+  CastShadowMap map;
+  map.towards_light = towards_light.normalized();
+  const Eigen::Vector3f d = map.towards_light;
+  const Eigen::Vector3f helper =
+      std::abs(d.z()) < 0.9f ? Eigen::Vector3f::UnitZ() : Eigen::Vector3f::UnitX();
+  map.axis_u = d.cross(helper).normalized();
+  map.axis_v = d.cross(map.axis_u);
+  map.tan_radius = static_cast<float>(std::tan(0.5 * light_size_deg * std::numbers::pi / 180.0));
+  std::vector<Eigen::Vector3f> projected(scene.positions.size());
+  Eigen::Vector2f lo = Eigen::Vector2f::Constant(std::numeric_limits<float>::infinity());
+  Eigen::Vector2f hi = -lo;
+  for (std::size_t i = 0; i < scene.positions.size(); ++i) {
+    const Eigen::Vector3f p = scene.positions[i].cast<float>();
+    projected[i] = {p.dot(map.axis_u), p.dot(map.axis_v), p.dot(d)};
+    lo = lo.cwiseMin(projected[i].head<2>());
+    hi = hi.cwiseMax(projected[i].head<2>());
+  }
+  const float extent = std::max(hi.x() - lo.x(), hi.y() - lo.y());
+  const float margin = 0.5f * extent + 0.05f;
+  map.cell = (extent + 2.0f * margin) / kCells;
+  map.origin_u = 0.5f * (lo.x() + hi.x()) - 0.5f * kCells * map.cell;
+  map.origin_v = 0.5f * (lo.y() + hi.y()) - 0.5f * kCells * map.cell;
+  cv::Mat outside(kCells, kCells, CV_8UC1, cv::Scalar(255));
+  cv::Mat height(kCells, kCells, CV_32FC1, cv::Scalar(-std::numeric_limits<float>::infinity()));
+  for (const Eigen::Vector3i& tri : scene.triangles) {
+    Eigen::Vector3f q[3];
+    for (int k = 0; k < 3; ++k) {
+      q[k] = projected[tri[k]];
+      q[k].x() = (q[k].x() - map.origin_u) / map.cell;
+      q[k].y() = (q[k].y() - map.origin_v) / map.cell;
+    }
+    const float area = (q[1].x() - q[0].x()) * (q[2].y() - q[0].y()) -
+                       (q[2].x() - q[0].x()) * (q[1].y() - q[0].y());
+    const int x0 =
+        std::max(0, static_cast<int>(std::floor(std::min({q[0].x(), q[1].x(), q[2].x()}))));
+    const int x1 = std::min(kCells - 1, static_cast<int>(std::max({q[0].x(), q[1].x(), q[2].x()})));
+    const int y0 =
+        std::max(0, static_cast<int>(std::floor(std::min({q[0].y(), q[1].y(), q[2].y()}))));
+    const int y1 = std::min(kCells - 1, static_cast<int>(std::max({q[0].y(), q[1].y(), q[2].y()})));
+    bool covered = false;
+    if (std::abs(area) > 1e-12f) {
+      for (int y = y0; y <= y1; ++y) {
+        for (int x = x0; x <= x1; ++x) {
+          const float px = x + 0.5f, py = y + 0.5f;
+          float b[3];
+          for (int k = 0; k < 3; ++k) {
+            const Eigen::Vector3f& a = q[(k + 1) % 3];
+            const Eigen::Vector3f& c = q[(k + 2) % 3];
+            b[k] = ((c.x() - a.x()) * (py - a.y()) - (c.y() - a.y()) * (px - a.x())) / area;
+          }
+          if (b[0] < 0.0f || b[1] < 0.0f || b[2] < 0.0f) continue;
+          covered = true;
+          outside.at<std::uint8_t>(y, x) = 0;
+          float& h = height.at<float>(y, x);
+          h = std::max(h, b[0] * q[0].z() + b[1] * q[1].z() + b[2] * q[2].z());
+        }
+      }
+    }
+    if (!covered) {
+      // Smaller than a cell: its centroid's cell.
+      const Eigen::Vector3f c = (q[0] + q[1] + q[2]) / 3.0f;
+      const int x = static_cast<int>(c.x()), y = static_cast<int>(c.y());
+      if (x >= 0 && y >= 0 && x < kCells && y < kCells) {
+        outside.at<std::uint8_t>(y, x) = 0;
+        height.at<float>(y, x) =
+            std::max(height.at<float>(y, x), std::max({q[0].z(), q[1].z(), q[2].z()}));
+      }
+    }
+  }
+  // Outside: the distance to, and the height of, the nearest footprint cell.
+  cv::Mat distance_out, labels;
+  cv::distanceTransform(outside, distance_out, labels, cv::DIST_L2, cv::DIST_MASK_5,
+                        cv::DIST_LABEL_PIXEL);
+  std::vector<float> height_of_label(1, -std::numeric_limits<float>::infinity());
+  for (int y = 0; y < kCells; ++y) {
+    for (int x = 0; x < kCells; ++x) {
+      if (outside.at<std::uint8_t>(y, x)) continue;
+      const auto label = static_cast<std::size_t>(labels.at<int>(y, x));
+      if (label >= height_of_label.size())
+        height_of_label.resize(label + 1, -std::numeric_limits<float>::infinity());
+      height_of_label[label] = height.at<float>(y, x);
+    }
+  }
+  cv::Mat distance_in;
+  cv::distanceTransform(~outside, distance_in, cv::DIST_L2, cv::DIST_MASK_5);
+  map.signed_distance.create(kCells, kCells, CV_32FC1);
+  map.occluder_height.create(kCells, kCells, CV_32FC1);
+  for (int y = 0; y < kCells; ++y) {
+    for (int x = 0; x < kCells; ++x) {
+      const bool out = outside.at<std::uint8_t>(y, x) != 0;
+      map.signed_distance.at<float>(y, x) =
+          map.cell * (out ? distance_out.at<float>(y, x) : 0.5f - distance_in.at<float>(y, x));
+      const auto label = static_cast<std::size_t>(labels.at<int>(y, x));
+      map.occluder_height.at<float>(y, x) =
+          out ? (label < height_of_label.size() ? height_of_label[label]
+                                                : -std::numeric_limits<float>::infinity())
+              : height.at<float>(y, x);
+    }
+  }
+  return map;
+}
+
 class Rasteriser {
  public:
-  Rasteriser(const Scene& scene, const CameraModel& camera, const RenderOptions& options,
-             const std::vector<ScreenTriangle>& triangles,
+  Rasteriser(const Scene& scene, const CameraModel& camera, double table_angle_rad,
+             const RenderOptions& options, const std::vector<ScreenTriangle>& triangles,
              const std::vector<std::vector<std::uint32_t>>& bins, int tiles_x,
              const std::vector<Eigen::Vector3f>& lights_world, RenderResult& result)
       : scene_(scene),
@@ -346,18 +482,32 @@ class Rasteriser {
     };
     plate_ = linear(options.plate_color);
     cam_translation_ = camera.cam_from_world.translation.cast<float>();
-    // The backdrop is a vertical gradient: one colour per image row.
-    const Eigen::Vector3f top = linear(options.backdrop_top);
-    const Eigen::Vector3f bottom = linear(options.backdrop_bottom);
+    // The backdrop is a vertical gradient: one colour per image row (the lit panel, uniform,
+    // in a backlit shot).
+    const Eigen::Vector3f top =
+        options.backlit ? Eigen::Vector3f::Constant(static_cast<float>(options.backlight))
+                        : linear(options.backdrop_top);
+    const Eigen::Vector3f bottom = options.backlit ? top : linear(options.backdrop_bottom);
     backdrop_rows_.resize(camera.height);
     for (int y = 0; y < camera.height; ++y) {
       const float fy = camera.height > 1 ? static_cast<float>(y) / (camera.height - 1) : 0.0f;
       backdrop_rows_[y] = (1 - fy) * top + fy * bottom;
     }
     mixed_seed_ = Mix(options.seed);
+    // Vignetting: gain 1 / (1 + a rho^2)^2 (the cos^4 law) with rho = 1 at the corner farthest
+    // from the principal point, a chosen so that the gain there is 1 - vignetting.
+    const double corner_x = std::max(camera.cx, camera.width - 1 - camera.cx);
+    const double corner_y = std::max(camera.cy, camera.height - 1 - camera.cy);
+    inv_corner_sq_ =
+        static_cast<float>(1.0 / std::max(1.0, corner_x * corner_x + corner_y * corner_y));
+    vignette_a_ = static_cast<float>(1.0 / std::sqrt(1.0 - options.vignetting) - 1.0);
+    // The studio frame of backdrop rays: studio = Rz(angle) world.
+    studio_from_world_ = Rigid3d::RotationZ(table_angle_rad).rotation.cast<float>();
+    camera_centre_studio_ = studio_from_world_ * camera.Centre().cast<float>();
   }
 
   void SetContactShadow(const ContactShadowMap* shadow) { shadow_ = shadow; }
+  void SetCastShadow(const CastShadowMap* shadow) { cast_ = shadow; }
 
   // Renders one tile; `buffer` is the calling worker's scratch space.
   void RenderTile(int tile, std::vector<Sample>& buffer) {
@@ -480,30 +630,43 @@ class Rasteriser {
       }
     }
     const float exposure = static_cast<float>(options_.exposure);
+    const int ix = std::clamp(static_cast<int>(std::lround(px)), 0, camera_.width - 1);
+    const int iy = std::clamp(static_cast<int>(std::lround(py)), 0, camera_.height - 1);
+    if (t.material < 0 && options_.backlit) {
+      // The plate is a light table: it glows like the panel.
+      return Eigen::Vector3f::Constant(static_cast<float>(options_.backlight) * kPlateGlow *
+                                       BackdropFalloff(ix, iy));
+    }
+    const Eigen::Vector3f world = world_from_cam_ * (position - cam_translation_);
     if (t.material < 0 && shadow_ != nullptr) {
       // The object's base occludes the plate's light near it.
-      const Eigen::Vector3f world = world_from_cam_ * (position - cam_translation_);
       const float d = shadow_->At(world.x(), world.y());
       albedo *= 1.0f - static_cast<float>(options_.contact_shadow) *
                            std::exp(-d / static_cast<float>(options_.contact_shadow_radius_m));
     }
-    if (!options_.lit) return albedo * exposure;
+    // The front lights: dimmed for a backlit shot.
+    const float front = options_.backlit ? static_cast<float>(options_.backlit_front) : 1.0f;
+    if (!options_.lit) return albedo * (exposure * front);
     const float length = n.norm();
     n = length > 0 ? Eigen::Vector3f(n / length) : Eigen::Vector3f::UnitZ();
     if (t.flip_normal) n = -n;
+    const float distance = position.norm();
+    const Eigen::Vector3f to_eye = distance > 0
+                                       ? Eigen::Vector3f(world_from_cam_ * (-position / distance))
+                                       : Eigen::Vector3f::UnitZ();
     float light = static_cast<float>(options_.ambient);
     for (std::size_t i = 0; i < lights_world_.size(); ++i) {
       const float wrap = static_cast<float>(options_.lights[i].wrap);
       const float d = (n.dot(lights_world_[i]) + wrap) / (1.0f + wrap);
-      light += static_cast<float>(options_.lights[i].intensity) * std::max(d, 0.0f);
+      float intensity = static_cast<float>(options_.lights[i].intensity);
+      // The key light's cast shadow falls on the plate (the object shades itself already).
+      if (i == 0 && t.material < 0 && cast_ != nullptr)
+        intensity *= 1.0f - static_cast<float>(options_.cast_shadow) * cast_->Occlusion(world);
+      light += intensity * std::max(d, 0.0f);
     }
-    Eigen::Vector3f colour = albedo * (light * exposure);
+    Eigen::Vector3f colour = albedo * (light * exposure * front);
     if (specular > 0.0f) {
       // Blinn-Phong highlights of the studio lights, white (a dielectric's).
-      const float distance = position.norm();
-      const Eigen::Vector3f to_eye = distance > 0
-                                         ? Eigen::Vector3f(world_from_cam_ * (-position / distance))
-                                         : Eigen::Vector3f::UnitZ();
       float highlight = 0.0f;
       for (std::size_t i = 0; i < lights_world_.size(); ++i) {
         if (n.dot(lights_world_[i]) <= 0.0f) continue;
@@ -511,14 +674,73 @@ class Rasteriser {
         highlight += static_cast<float>(options_.lights[i].intensity) *
                      std::pow(std::max(n.dot(half), 0.0f), shininess);
       }
-      colour += Eigen::Vector3f::Constant(specular * highlight * exposure);
+      colour += Eigen::Vector3f::Constant(specular * highlight * exposure * front);
+    }
+    if (t.material < 0) return colour;
+    // Grazing angles: a Fresnel reflection (Schlick, a dielectric's 4 %) replaces what passes
+    // through a see-through surface; a backlit shot's light wraps round the outline.
+    const float facing = std::min(1.0f, std::abs(n.dot(to_eye)));
+    const float grazing = 1.0f - facing;
+    const float grazing2 = grazing * grazing;
+    const float fresnel = 0.04f + 0.96f * grazing2 * grazing2 * grazing;
+    const float transmission = scene_.materials[t.material].transmission * (1.0f - fresnel);
+    if (transmission > 0.0f) {
+      // What lies behind: the backdrop (or the lit panel) at this pixel, tinted.
+      const Eigen::Vector3f behind = BackdropAt(ix, iy);
+      colour = (1.0f - transmission) * colour +
+               transmission * scene_.materials[t.material].base_color.cwiseProduct(behind);
+    }
+    if (options_.backlit) {
+      const float wrap = grazing2 * grazing2 * grazing2 * (specular > 0.0f ? 0.5f : 0.3f);
+      colour += Eigen::Vector3f::Constant(static_cast<float>(options_.backlight) * wrap *
+                                          BackdropFalloff(ix, iy));
     }
     return colour;
   }
 
+  // The backdrop light's falloff towards the frame's corners (1 at the centre).
+  float BackdropFalloff(int x, int y) const {
+    if (options_.backdrop_falloff <= 0.0) return 1.0f;
+    const float nx = (2.0f * x + 1.0f) / camera_.width - 1.0f;
+    const float ny = (2.0f * y + 1.0f) / camera_.height - 1.0f;
+    return 1.0f - static_cast<float>(options_.backdrop_falloff) * 0.5f * (nx * nx + ny * ny);
+  }
+
+  // The backdrop (linear RGB) at pixel (x, y): its gradient, the light's falloff and, on the
+  // sweep, the key light's cast shadow.
+  Eigen::Vector3f BackdropAt(int x, int y) const {
+    float gain = BackdropFalloff(x, y);
+    if (cast_ != nullptr && !options_.backlit) {
+      // Where the pixel's ray meets the sweep (wall or floor, studio frame; a pinhole ray is
+      // close enough for a soft shadow).
+      const Eigen::Vector3f ray_cam(static_cast<float>((x - camera_.cx) / camera_.fx),
+                                    static_cast<float>((y - camera_.cy) / camera_.fy), 1.0f);
+      const Eigen::Vector3f ray = studio_from_world_ * (world_from_cam_ * ray_cam);
+      const Eigen::Vector3f& o = camera_centre_studio_;
+      float hit = std::numeric_limits<float>::infinity();
+      if (ray.y() > 1e-6f)
+        hit = std::min(hit, (static_cast<float>(options_.sweep_distance_m) - o.y()) / ray.y());
+      if (ray.z() < -1e-6f)
+        hit = std::min(hit, (static_cast<float>(options_.sweep_floor_m) - o.z()) / ray.z());
+      if (hit > 0.0f && std::isfinite(hit)) {
+        const Eigen::Vector3f studio = o + hit * ray;
+        const Eigen::Vector3f world = studio_from_world_.transpose() * studio;
+        gain *= 1.0f - static_cast<float>(options_.cast_shadow) * sweep_key_share_ *
+                           cast_->Occlusion(world);
+      }
+    }
+    return backdrop_rows_[y] * gain;
+  }
+
   // Writes a pixel's final colour (linear RGB) with sensor noise, as 8-bit BGR.
-  void WritePixel(int x, int y, const Eigen::Vector3f& colour, cv::Vec3b& out) const {
+  void WritePixel(int x, int y, const Eigen::Vector3f& colour_in, cv::Vec3b& out) const {
     const ColourTables& tables = Tables();
+    Eigen::Vector3f colour = colour_in;
+    if (vignette_a_ > 0.0f) {
+      const float dx = static_cast<float>(x - camera_.cx), dy = static_cast<float>(y - camera_.cy);
+      const float q = 1.0f + vignette_a_ * (dx * dx + dy * dy) * inv_corner_sq_;
+      colour /= q * q;
+    }
     for (int c = 0; c < 3; ++c) {
       float value = tables.Encode(colour[c]);
       if (options_.noise_sigma > 0) {
@@ -532,7 +754,7 @@ class Rasteriser {
   void FillBackdrop(int x0, int y0, int x1, int y1) const {
     for (int y = y0; y < y1; ++y) {
       auto* image_row = result_.image.ptr<cv::Vec3b>(y);
-      for (int x = x0; x < x1; ++x) WritePixel(x, y, backdrop_rows_[y], image_row[x]);
+      for (int x = x0; x < x1; ++x) WritePixel(x, y, BackdropAt(x, y), image_row[x]);
       std::fill(result_.mask.ptr<std::uint8_t>(y) + x0, result_.mask.ptr<std::uint8_t>(y) + x1, 0);
       std::fill(result_.depth.ptr<float>(y) + x0, result_.depth.ptr<float>(y) + x1, 0.0f);
     }
@@ -540,7 +762,6 @@ class Rasteriser {
 
   void Resolve(int x0, int y0, int x1, int y1, int w, const std::vector<Sample>& buffer) const {
     for (int y = y0; y < y1; ++y) {
-      const Eigen::Vector3f& backdrop = backdrop_rows_[y];
       auto* image_row = result_.image.ptr<cv::Vec3b>(y);
       auto* mask_row = result_.mask.ptr<std::uint8_t>(y);
       auto* depth_row = result_.depth.ptr<float>(y);
@@ -553,7 +774,7 @@ class Rasteriser {
         if (uniform) {
           const int id = pixel[0].triangle;
           if (id < 0) {
-            WritePixel(x, y, backdrop, image_row[x]);
+            WritePixel(x, y, BackdropAt(x, y), image_row[x]);
             mask_row[x] = 0;
             depth_row[x] = 0.0f;
           } else {
@@ -583,7 +804,7 @@ class Rasteriser {
           }
           const float weight = static_cast<float>(count) / samples_;
           if (id < 0) {
-            colour += weight * backdrop;
+            colour += weight * BackdropAt(x, y);
             continue;
           }
           const ScreenTriangle& t = triangles_[id];
@@ -615,6 +836,14 @@ class Rasteriser {
   Eigen::Matrix3f world_from_cam_;
   Eigen::Vector3f cam_translation_;
   const ContactShadowMap* shadow_ = nullptr;
+  const CastShadowMap* cast_ = nullptr;
+  // The key light's share of the sweep's light (what a full cast shadow takes away from it,
+  // times cast_shadow).
+  float sweep_key_share_ = 0.5f;
+  float inv_corner_sq_ = 0.0f;
+  float vignette_a_ = 0.0f;
+  Eigen::Matrix3f studio_from_world_ = Eigen::Matrix3f::Identity();
+  Eigen::Vector3f camera_centre_studio_ = Eigen::Vector3f::Zero();
   std::vector<Eigen::Vector2d> offsets_;
   std::vector<Eigen::Vector3f> backdrop_rows_;  // linear RGB per image row
   Eigen::Vector3f plate_;
@@ -649,6 +878,20 @@ void RenderOptions::Validate() const {
                     InvalidArgument,
                     "RenderOptions: contact_shadow must be in 0..1 and contact_shadow_radius_m in "
                     "(0, 1) m");
+  CAROUSEL_THROW_IF(!(cast_shadow >= 0 && cast_shadow <= 1) ||
+                        !(key_light_size_deg > 0 && key_light_size_deg < 90) ||
+                        !(sweep_distance_m > 0 && sweep_distance_m < 100) ||
+                        !(sweep_floor_m <= 0 && sweep_floor_m > -100),
+                    InvalidArgument,
+                    "RenderOptions: cast_shadow must be in 0..1, key_light_size_deg in (0, 90), "
+                    "sweep_distance_m > 0 and sweep_floor_m <= 0");
+  CAROUSEL_THROW_IF(!(backdrop_falloff >= 0 && backdrop_falloff <= 0.9) ||
+                        !(vignetting >= 0 && vignetting <= 0.9),
+                    InvalidArgument,
+                    "RenderOptions: backdrop_falloff and vignetting must be in 0..0.9");
+  CAROUSEL_THROW_IF(
+      !(backlight > 0 && backlight <= 1) || !(backlit_front >= 0 && backlit_front <= 1),
+      InvalidArgument, "RenderOptions: backlight must be in (0, 1] and backlit_front in 0..1");
   CAROUSEL_THROW_IF(!(noise_sigma >= 0 && noise_sigma <= 64), InvalidArgument,
                     "RenderOptions.noise_sigma must be in 0..64, got " << noise_sigma);
   CAROUSEL_THROW_IF(!(max_edge_error_px > 0), InvalidArgument,
@@ -733,9 +976,16 @@ RenderResult Render(const Scene& scene, const CameraModel& camera, double table_
   result.mask.create(camera.height, camera.width, CV_8UC1);
   result.depth.create(camera.height, camera.width, CV_32FC1);
   result.triangles_rasterized = triangles.size();
-  Rasteriser rasteriser(scene, camera, options, triangles, bins, tiles_x, lights_world, result);
+  Rasteriser rasteriser(scene, camera, table_angle_rad, options, triangles, bins, tiles_x,
+                        lights_world, result);
+  CastShadowMap cast;
+  if (options.cast_shadow > 0 && !options.backlit && !lights_world.empty() &&
+      !scene.triangles.empty() && options.lit) {
+    cast = MakeCastShadowMap(scene, lights_world.front(), options.key_light_size_deg);
+    rasteriser.SetCastShadow(&cast);
+  }
   ContactShadowMap shadow;
-  if (options.contact_shadow > 0 && options.plate_radius_m > 0) {
+  if (options.contact_shadow > 0 && options.plate_radius_m > 0 && !options.backlit) {
     shadow = MakeContactShadowMap(scene, options.plate_radius_m + options.contact_shadow_radius_m,
                                   options.contact_shadow_radius_m);
     rasteriser.SetContactShadow(&shadow);

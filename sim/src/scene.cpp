@@ -757,7 +757,9 @@ MaterialOverride ParseMaterialOverride(const std::string& name) {
   if (name == "white") return MaterialOverride::kWhite;
   if (name == "black") return MaterialOverride::kBlack;
   if (name == "glossy") return MaterialOverride::kGlossy;
-  throw InvalidArgument("unknown material '" + name + "' (expected none, white, black or glossy)");
+  if (name == "see-through") return MaterialOverride::kSeeThrough;
+  throw InvalidArgument("unknown material '" + name +
+                        "' (expected none, white, black, glossy or see-through)");
 }
 
 const char* MaterialOverrideName(MaterialOverride material) {
@@ -768,6 +770,8 @@ const char* MaterialOverrideName(MaterialOverride material) {
       return "black";
     case MaterialOverride::kGlossy:
       return "glossy";
+    case MaterialOverride::kSeeThrough:
+      return "see-through";
     case MaterialOverride::kNone:
       break;
   }
@@ -788,6 +792,13 @@ void Scene::OverrideMaterials(MaterialOverride material) {
       case MaterialOverride::kGlossy:
         m.specular = 0.8f;
         m.shininess = 80.0f;
+        break;
+      case MaterialOverride::kSeeThrough:
+        m.base_color = Eigen::Vector3f(0.88f, 0.95f, 0.9f);
+        m.texture = -1;
+        m.transmission = 0.85f;
+        m.specular = 0.8f;
+        m.shininess = 120.0f;
         break;
       case MaterialOverride::kNone:
         break;

@@ -207,7 +207,13 @@ rig::TurntableStatus SimTurntable::Status() {
   status.target_rad = target_rad_;
   status.moving = status.angle_rad != target_rad_;
   status.homed = homed_;
+  status.backlight = backlight_;
   return status;
+}
+
+void SimTurntable::SetBacklight(bool on) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  backlight_ = on;
 }
 
 void SimTurntable::Stop(bool emergency) {
@@ -284,8 +290,10 @@ double SimCamera::ExposureGain() const {
 }
 
 std::vector<std::uint8_t> SimCamera::Shoot() {
-  const double angle = turntable_->Status().angle_rad;
+  const rig::TurntableStatus table = turntable_->Status();
+  const double angle = table.angle_rad;
   RenderOptions render = options_.render;
+  render.backlit = table.backlight;
   render.exposure = std::clamp(ExposureGain(), 1e-3, 999.0);
   std::shared_ptr<const Scene> scene;
   {
@@ -336,9 +344,11 @@ void SimCamera::Download(const rig::CapturedPhoto& photo, const std::filesystem:
 }
 
 cv::Mat SimCamera::PreviewFrame(std::chrono::milliseconds) {
-  const double angle = turntable_->Status().angle_rad;
+  const rig::TurntableStatus table = turntable_->Status();
+  const double angle = table.angle_rad;
   const double factor = 640.0 / cam_from_studio_.width;
   RenderOptions render = options_.render;
+  render.backlit = table.backlight;
   render.samples_per_axis = 1;
   render.exposure = std::clamp(ExposureGain(), 1e-3, 999.0);
   std::shared_ptr<const Scene> scene;

@@ -2,6 +2,7 @@
 
 #include <cstdio>
 #include <numbers>
+#include <string>
 
 #include <opencv2/imgcodecs.hpp>
 
@@ -57,6 +58,16 @@ SimViews RenderViews(const Scene& scene, const SimViewsOptions& options) {
       std::snprintf(name, sizeof name, "cam%zu_stop%02d", c, stop);
       view.set_name(name);
       view.SetImage(ThroughJpeg(rendered.image, options.jpeg_quality));
+      if (options.mask_shots) {
+        RenderOptions backlit = render;
+        backlit.backlit = true;
+        backlit.seed = render.seed ^ 0x6a09e667f3bcc909ULL;
+        View shot(camera, {}, {}, angle);
+        shot.set_name(std::string(name) + "_backlit");
+        shot.SetImage(
+            ThroughJpeg(Render(scene, camera, angle, backlit).image, options.jpeg_quality));
+        result.mask_shots.push_back(std::move(shot));
+      }
       result.views.push_back(std::move(view));
       result.truth_masks.push_back(rendered.mask);
       if (options.backgrounds) result.backgrounds.push_back(camera_backgrounds[c]);

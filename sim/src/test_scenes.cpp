@@ -1,6 +1,7 @@
 #include "carousel/sim/test_scenes.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include "carousel/core/error.h"
@@ -43,6 +44,42 @@ Scene MakeRingScene(double major_radius, double minor_radius, const Eigen::Vecto
   for (const auto v : torus.vertices())
     torus.set_point(v, torus.point(v) + OpenMesh::Vec3d(0.0, 0.0, minor_radius));
   return SceneFromMesh(torus, color, "procedural ring");
+}
+
+Scene MakeMugScene(double height, const Eigen::Vector3f& color) {
+  CAROUSEL_THROW_IF(!(height > 0), InvalidArgument, "MakeMugScene: height must be > 0");
+  const double radius = 0.4 * height;
+  Mesh mug = MakeCylinder(radius, height, 128, 8);
+  // The handle: a torus in the x-z plane centred on the body's wall at half height; the part
+  // inside the body is left out (hidden, and no surface of the product).
+  const double major = 0.28 * height, minor = 0.07 * height;
+  const Mesh torus = MakeTorus(major, minor, 96, 24);
+  std::vector<Mesh::VertexHandle> handle(torus.n_vertices());
+  auto inside = [&](const OpenMesh::Vec3d& p) {
+    return p[0] * p[0] + p[1] * p[1] < (radius - 0.5 * minor) * (radius - 0.5 * minor);
+  };
+  auto placed = [&](Mesh::VertexHandle v) {
+    // Torus about +Z -> about +Y (x stays, y -> z, z -> -y), then onto the wall.
+    const OpenMesh::Vec3d& p = torus.point(v);
+    return OpenMesh::Vec3d(radius + p[0], -p[2], 0.5 * height + p[1]);
+  };
+  for (Mesh::FaceHandle f : torus.faces()) {
+    std::array<Mesh::VertexHandle, 3> corners;
+    int k = 0, hidden = 0;
+    for (Mesh::VertexHandle v : torus.fv_range(f)) {
+      hidden += inside(placed(v)) ? 1 : 0;
+      corners[k++] = v;
+    }
+    if (hidden == 3) continue;
+    std::array<Mesh::VertexHandle, 3> added;
+    for (int i = 0; i < 3; ++i) {
+      Mesh::VertexHandle& h = handle[static_cast<std::size_t>(corners[i].idx())];
+      if (!h.is_valid()) h = mug.add_vertex(placed(corners[i]));
+      added[i] = h;
+    }
+    mug.add_face(added[0], added[1], added[2]);
+  }
+  return SceneFromMesh(mug, color, "procedural mug");
 }
 
 Scene MakeCheckerPlaneScene(double size, int squares, double height, int texels_per_square) {

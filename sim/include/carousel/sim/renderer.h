@@ -8,8 +8,13 @@
 // pixel: anti-aliased edges; each pixel is shaded once per covering triangle at the centroid
 // of its covered samples, with perspective-correct texture coordinates and trilinear
 // mip-mapped texture filtering. Lighting in linear RGB: ambient plus soft (wrapped) directional
-// lights fixed in the studio (they do not turn with the table). Backdrop: a vertical gradient
-// in image space and the turntable plate (a disc at z = 0, not part of the mask).
+// lights fixed in the studio (they do not turn with the table), Blinn-Phong highlights,
+// see-through materials (the backdrop behind them, tinted, with a Fresnel falloff). Backdrop: a
+// vertical gradient in image space with the backdrop light's falloff, and the turntable plate
+// (a disc at z = 0, not part of the mask); the key light's soft cast shadow on the plate and on
+// the sweep (a wall and a floor in the studio), the object's contact shadow on the plate; lens
+// vignetting over the whole photo. The backlit shot (a mask shot) lights the backdrop and the
+// plate from behind instead.
 // Determinism: the same inputs give byte-identical images regardless of thread count; noise
 // comes from a hash of (seed, pixel, channel).
 #pragma once
@@ -56,6 +61,29 @@ struct RenderOptions {
   // footprint is what of the object lies within the radius of the table. 0 = none.
   double contact_shadow = 0.0;
   double contact_shadow_radius_m = 0.015;
+  // The key light's cast shadow (lights[0], soft: the light spans key_light_size_deg, so the
+  // penumbra widens with the distance from the object) on the plate and on the sweep: the
+  // fraction of the key light a full shadow takes away, 0..1 (0 = none).
+  double cast_shadow = 0.0;
+  double key_light_size_deg = 12.0;  // (0, 90)
+  // The sweep the backdrop colours belong to, in the studio frame, for the cast shadow: a wall
+  // at y = sweep_distance_m (behind the table as the cameras see it) on a floor at
+  // z = sweep_floor_m (the plate stands above it). Its colours stay the backdrop gradient.
+  double sweep_distance_m = 0.8;  // > 0
+  double sweep_floor_m = -0.08;   // <= 0
+  // The backdrop light's falloff: the fraction darker in the frame's corners than at its
+  // centre (a light aimed at the middle of the sweep; quadratic), 0..0.9.
+  double backdrop_falloff = 0.0;
+  // Lens vignetting: the fraction of light lost in the frame's corners (the cos^4 law's
+  // profile from the principal point), 0..0.9; everything in the photo darkens with it.
+  double vignetting = 0.0;
+  // The backlit shot (a mask shot, the backlight on): the backdrop panel and the plate (a
+  // light table) glow at `backlight` (linear, falling off like the backdrop), the front lights
+  // dimmed to `backlit_front` of their power. The product shows dark against the lit panel,
+  // its outline faintly lit by the light wrapping round it, see-through parts bright.
+  bool backlit = false;
+  double backlight = 0.8;       // (0, 1]
+  double backlit_front = 0.08;  // 0..1
   // Gaussian sensor noise, standard deviation in 8-bit levels (0 = none).
   double noise_sigma = 0.0;
   // Seed of the noise.

@@ -44,12 +44,16 @@ struct Material {
   // Highlights (Blinn-Phong, white): strength (linear, 0 = matte) and exponent.
   float specular = 0.0f;
   float shininess = 50.0f;
+  // See-through (glass, clear plastic): the fraction of the light behind the surface that
+  // passes through it, tinted by base_color, at normal incidence (less at grazing angles,
+  // where a Fresnel reflection takes over); 0 = opaque.
+  float transmission = 0.0f;
 };
 
-// What a studio finds hard, on any scene: every material made white, black or glossy (its own
-// colours and a strong highlight).
-enum class MaterialOverride { kNone, kWhite, kBlack, kGlossy };
-// "none", "white", "black", "glossy". \throw InvalidArgument naming the others.
+// What a studio finds hard, on any scene: every material made white, black, glossy (its own
+// colours and a strong highlight) or see-through (clear, faintly tinted glass with highlights).
+enum class MaterialOverride { kNone, kWhite, kBlack, kGlossy, kSeeThrough };
+// "none", "white", "black", "glossy", "see-through". \throw InvalidArgument naming the others.
 MaterialOverride ParseMaterialOverride(const std::string& name);
 const char* MaterialOverrideName(MaterialOverride material);
 
@@ -78,8 +82,9 @@ struct Scene {
   // \throw InvalidArgument if arrays disagree in size, an index is out of range or a
   // coordinate is not finite.
   void Validate() const;
-  // Every material white (albedo 0.9, no texture), black (0.03) or glossy (its colours, a
-  // strong, sharp highlight); kNone changes nothing.
+  // Every material white (albedo 0.9, no texture), black (0.03), glossy (its colours, a
+  // strong, sharp highlight) or see-through (transmission 0.85, a faint green tint, the
+  // glossy highlight); kNone changes nothing.
   void OverrideMaterials(MaterialOverride material);
 };
 

@@ -66,6 +66,8 @@ class SimTurntable : public rig::Turntable {
   void WaitUntilStopped(std::chrono::milliseconds timeout) override;
   rig::TurntableStatus Status() override;
   void Stop(bool emergency) override;
+  // The studio's backlight (SimCamera renders a backlit shot while it is on).
+  void SetBacklight(bool on) override;
   // Simulated seconds a move of `distance_rad` takes.
   double MoveSeconds(double distance_rad) const;
 
@@ -81,6 +83,7 @@ class SimTurntable : public rig::Turntable {
   double duration_s_ = 0.0;   // wall-clock seconds of the current move
   double brake_speed_ = 0.0;  // > 0: the move is a stop decelerating from this speed, rad/s
   bool homed_ = false;
+  bool backlight_ = false;
 };
 
 struct SimCameraOptions {
@@ -90,7 +93,8 @@ struct SimCameraOptions {
   void Validate() const;
 };
 
-// A camera that photographs the scene on a SimTurntable from its place in the studio.
+// A camera that photographs the scene on a SimTurntable from its place in the studio (a backlit
+// shot while the table's backlight is on).
 // Settings (iso, aperture, shutterspeed) change the exposure like a real camera's, relative to
 // ISO 100, f/8, 1/125 s.
 class SimCamera : public rig::Camera {

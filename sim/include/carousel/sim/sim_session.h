@@ -21,6 +21,7 @@ struct SimViewsOptions {
   RenderOptions render;      // seed varies per view
   int jpeg_quality = 95;     // photos go through JPEG at this quality; 0 = keep them lossless
   bool backgrounds = false;  // also render each camera's empty-turntable background plate
+  bool mask_shots = false;   // also render each view's backlit mask shot (RenderOptions::backlit)
   void Validate() const;
 };
 
@@ -28,6 +29,7 @@ struct SimViews {
   std::vector<View> views;           // named camC_stopNN, pixels in memory, no masks
   std::vector<cv::Mat> truth_masks;  // per view, exact silhouettes (CV_8UC1)
   std::vector<cv::Mat> backgrounds;  // per view (shared per camera) when requested
+  std::vector<View> mask_shots;      // per view, its backlit mask shot, when requested
   Mesh truth_mesh;                   // the scene's surface, turntable frame
 };
 

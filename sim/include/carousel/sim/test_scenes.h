@@ -25,6 +25,11 @@ Scene MakeSphereScene(double radius, const Eigen::Vector3d& centre, int subdivis
 Scene MakeRingScene(double major_radius, double minor_radius,
                     const Eigen::Vector3f& color = {0.2f, 0.45f, 0.75f});
 
+// A mug standing on the table: a closed cylinder `height` tall (radius 0.4 x height) with a
+// round handle on its side (+X at table angle 0) whose opening is see-through from the sides:
+// a silhouette must keep that hole open.
+Scene MakeMugScene(double height, const Eigen::Vector3f& color = {0.85f, 0.35f, 0.2f});
+
 // A square plate in the z = `height` plane, centred on the axis, `size` metres wide, with a
 // black-and-white checkerboard texture of `squares` x `squares` squares, `texels_per_square`
 // texels each. The inner checker corners sit at (-size/2 + i*size/squares, ...).
