@@ -2,11 +2,14 @@
 
 #include <cmath>
 #include <iostream>
+#include <memory>
 #include <numbers>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
 #include <opencv2/calib3d.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "carousel/core/error.h"
@@ -236,6 +239,144 @@ TEST(RendererTest, ContactShadowDarkensThePlateAtTheBaseOnly) {
   const cv::Vec3b far_plain = plain.image.at<cv::Vec3b>(camera.height - 3, 3);
   const cv::Vec3b far_shadow = shadowed.image.at<cv::Vec3b>(camera.height - 3, 3);
   EXPECT_NEAR(far_shadow[1], far_plain[1], 1.0);
+}
+
+double LinearGreen(const cv::Mat& image, int x, int y) {
+  const double c = image.at<cv::Vec3b>(y, x)[1] / 255.0;
+  return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4);
+}
+
+// Vignetting and the backdrop light's falloff darken the frame's corners by the fractions set
+// (in linear light), and leave its centre alone.
+TEST(RendererTest, VignettingAndFalloffDarkenTheCornersByTheirFractions) {
+  Scene empty;
+  empty.source = "empty";
+  SimRigOptions rig;
+  rig.width = 300;
+  rig.height = 200;
+  rig.distortion = {};
+  const CameraModel camera = MakeSimRig(rig, Eigen::AlignedBox3d(Eigen::Vector3d(-0.1, -0.1, 0),
+                                                                 Eigen::Vector3d(0.1, 0.1, 0.2)))
+                                 .front();
+  RenderOptions options;
+  options.plate_radius_m = 0.0;
+  options.backdrop_top = options.backdrop_bottom = {0.8, 0.8, 0.8};
+  const cv::Mat flat = Render(empty, camera, 0.0, options).image;
+  for (const bool vignetting : {true, false}) {
+    RenderOptions dark = options;
+    (vignetting ? dark.vignetting : dark.backdrop_falloff) = 0.3;
+    const cv::Mat image = Render(empty, camera, 0.0, dark).image;
+    const int cx = static_cast<int>(camera.cx), cy = static_cast<int>(camera.cy);
+    EXPECT_NEAR(LinearGreen(image, cx, cy) / LinearGreen(flat, cx, cy), 1.0, 0.02);
+    for (const auto& [x, y] : {std::pair{0, 0}, std::pair{299, 199}, std::pair{0, 199}}) {
+      const double ratio = LinearGreen(image, x, y) / LinearGreen(flat, x, y);
+      EXPECT_NEAR(ratio, 0.7, 0.04)
+          << (vignetting ? "vignetting" : "falloff") << " " << x << "," << y;
+    }
+    // Halfway out, less.
+    const double half = LinearGreen(image, cx / 2, cy / 2) / LinearGreen(flat, cx / 2, cy / 2);
+    EXPECT_GT(half, 0.8);
+    EXPECT_LT(half, 0.99);
+  }
+}
+
+// The key light (above, front left) casts the object's shadow onto the plate behind it to the
+// right, soft at its edge; the object and the mask are untouched, the lit side of the plate too.
+TEST(RendererTest, CastShadowFallsOnThePlateAwayFromTheKeyLightAndIsSoft) {
+  const Scene sphere = MakeSphereScene(0.05, {0, 0, 0.05}, 5, {0.7f, 0.7f, 0.7f});
+  const CameraModel camera = StudioCamera(320, 240, 30, sphere.Bounds(), {});
+  RenderOptions options;
+  options.plate_radius_m = 0.2;
+  const RenderResult plain = Render(sphere, camera, 0.0, options);
+  options.cast_shadow = 0.8;
+  const RenderResult shadowed = Render(sphere, camera, 0.0, options);
+  EXPECT_EQ(cv::countNonZero(plain.mask != shadowed.mask), 0);
+  cv::Mat diff, inside;
+  cv::absdiff(plain.image, shadowed.image, diff);
+  cv::erode(plain.mask, inside, cv::Mat(), cv::Point(-1, -1), 2);
+  EXPECT_EQ(cv::mean(diff, inside)[1], 0.0);
+  cv::Mat green;
+  cv::extractChannel(diff, green, 1);
+  const cv::Mat dark = (green > 12) & (plain.mask == 0);
+  const cv::Mat partial = (green > 2) & (green <= 12) & (plain.mask == 0);
+  ASSERT_GT(cv::countNonZero(dark), 300);
+  EXPECT_GT(cv::countNonZero(partial), 100);  // a penumbra
+  const cv::Moments shadow = cv::moments(dark, true);
+  const cv::Moments object = cv::moments(plain.mask, true);
+  // Behind (higher in the photo) and to the right of the object.
+  EXPECT_GT(shadow.m10 / shadow.m00, object.m10 / object.m00);
+  EXPECT_LT(shadow.m01 / shadow.m00, object.m01 / object.m00 + 0.5 * std::sqrt(object.m00));
+  // The lit side (left of the object) is untouched.
+  const cv::Rect box = cv::boundingRect(plain.mask);
+  EXPECT_EQ(cv::countNonZero(dark(cv::Rect(0, 0, std::max(1, box.x - 5), camera.height))), 0);
+}
+
+// The backlit shot: the panel and the plate glow, the product is dark against them; its mask
+// and depth are the photo's.
+TEST(RendererTest, BacklitShotShowsTheProductDarkAgainstTheLitPanel) {
+  Scene sphere = MakeSphereScene(0.05, {0, 0, 0.05}, 5, {0.9f, 0.9f, 0.9f});  // white
+  const CameraModel camera = StudioCamera(320, 240, 20, sphere.Bounds(), {});
+  RenderOptions options;
+  options.backdrop_top = options.backdrop_bottom = {0.96, 0.96, 0.96};  // white on white
+  const RenderResult photo = Render(sphere, camera, 0.0, options);
+  options.backlit = true;
+  const RenderResult backlit = Render(sphere, camera, 0.0, options);
+  EXPECT_EQ(cv::countNonZero(photo.mask != backlit.mask), 0);
+  cv::Mat inside, outside;
+  cv::erode(photo.mask, inside, cv::Mat(), cv::Point(-1, -1), 3);
+  cv::dilate(photo.mask, outside, cv::Mat(), cv::Point(-1, -1), 3);
+  outside = ~outside;
+  const double panel = cv::mean(backlit.image, outside)[1];
+  const double product = cv::mean(backlit.image, inside)[1];
+  EXPECT_NEAR(panel, 231.0, 8.0);  // linear 0.8, plate included
+  EXPECT_LT(product, 0.4 * panel);
+  // In the photo the white product is nearly the backdrop's brightness: no such contrast.
+  EXPECT_GT(cv::mean(photo.image, inside)[1], 0.6 * cv::mean(photo.image, outside)[1]);
+  // The simulated camera shoots it while the table's backlight is on.
+  auto table = std::make_shared<SimTurntable>(SimTurntableOptions{.time_scale = 0.0});
+  SimCameraOptions camera_options;
+  camera_options.render = options;
+  camera_options.render.backlit = false;
+  SimCamera sim_camera(std::make_shared<const Scene>(sphere), camera, table, camera_options);
+  const auto mean_inside = [&](const std::vector<std::uint8_t>& jpeg) {
+    return cv::mean(cv::imdecode(jpeg, cv::IMREAD_COLOR), inside)[1];
+  };
+  const double lit = mean_inside(sim_camera.Shoot());
+  table->SetBacklight(true);
+  EXPECT_TRUE(table->Status().backlight);
+  const double backlit_shot = mean_inside(sim_camera.Shoot());
+  table->SetBacklight(false);
+  EXPECT_LT(backlit_shot, 0.5 * lit);
+}
+
+// A see-through material shows the backdrop behind it, tinted, and its outline a little darker
+// (less passes through at grazing angles; refraction, which would darken it more, is not
+// modelled).
+TEST(RendererTest, SeeThroughMaterialShowsTheBackdropTintedBehindIt) {
+  Scene sphere = MakeSphereScene(0.05, {0, 0, 0.05}, 5);
+  sphere.OverrideMaterials(MaterialOverride::kSeeThrough);
+  EXPECT_EQ(ParseMaterialOverride("see-through"), MaterialOverride::kSeeThrough);
+  const CameraModel camera = StudioCamera(320, 240, 20, sphere.Bounds(), {});
+  RenderOptions options;
+  options.plate_radius_m = 0.0;
+  options.lights.clear();  // no highlight in the way
+  options.backdrop_top = options.backdrop_bottom = {0.8, 0.2, 0.2};
+  const RenderResult result = Render(sphere, camera, 0.0, options);
+  const cv::Rect box = cv::boundingRect(result.mask);
+  const cv::Vec3b centre =
+      result.image.at<cv::Vec3b>(box.y + box.height / 2, box.x + box.width / 2);
+  const cv::Vec3b backdrop = result.image.at<cv::Vec3b>(5, 5);
+  // Red like the backdrop behind it, a little dimmer.
+  EXPECT_GT(centre[2], 2 * centre[1]);
+  EXPECT_GT(centre[2], 0.75 * backdrop[2]);
+  EXPECT_LT(centre[2], backdrop[2]);
+  // The outline passes less: darker than the middle.
+  // (Just inside it, clear of the pixels it shares with the backdrop.)
+  cv::Mat in1, in3;
+  cv::erode(result.mask, in1, cv::Mat(), cv::Point(-1, -1), 1);
+  cv::erode(result.mask, in3, cv::Mat(), cv::Point(-1, -1), 3);
+  const cv::Mat ring = in1 & ~in3;
+  EXPECT_LT(cv::mean(result.image, ring)[2], centre[2] - 2.0);
 }
 
 // A finely tessellated disc under strong distortion: triangles split where the lens bends
