@@ -4,10 +4,14 @@
 // hull). A timed command-line run that prints its figures (the issue's targets: hull <= 5 s,
 // whole stage <= 15 s for 16 views of 5184x3456 on 2 cores).
 //
-//   recon_bench [--scene shoe|bottle|ring|sphere] [--width W] [--height H] [--stops N]
-//               [--voxel-px P] [--resolution R] [--max-resolution R] [--faces F] [--method
-//               key|difference]
-//               [--size-m S] [--noise SIGMA] [--jpeg Q] [--truth-masks] [--save DIR]
+//   recon_bench [--scene shoe|bottle|avocado|duck|ring|sphere|mug] [--width W] [--height H]
+//               [--stops N] [--voxel-px P] [--resolution R] [--max-resolution R] [--faces F]
+//               [--method auto|key|difference|backlit] [--mask-shots] [--size-m S]
+//               [--noise SIGMA] [--jpeg Q] [--material none|white|black|glossy|see-through]
+//               [--backdrop light|white|grey|black|green] [--exposure E] [--contact-shadow C]
+//               [--cast-shadow C] [--vignetting V] [--falloff F] [--seed N] [--truth-masks]
+//               [--save DIR]
+// With --mask-shots every view also gets its backlit mask shot (method auto takes them).
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
@@ -45,6 +49,7 @@ std::filesystem::path DataDir() {
 sim::Scene MakeScene(const std::string& name, double size_m) {
   if (name == "ring") return sim::MakeRingScene(0.4 * size_m, 0.1 * size_m);
   if (name == "sphere") return sim::MakeSphereScene(0.5 * size_m, {0.0, 0.0, 0.5 * size_m});
+  if (name == "mug") return sim::MakeMugScene(0.6 * size_m);
   sim::Scene scene = sim::LoadScene(studio::ResolveScene(name, DataDir()));
   sim::PlaceOnTurntable(scene, {.scale = 1.0});
   const double longest = scene.Bounds().sizes().maxCoeff();
@@ -57,8 +62,13 @@ sim::Scene MakeScene(const std::string& name, double size_m) {
 
 int main(int argc, char** argv) {
   std::string scene_name = "shoe";
-  std::string method = "key";
+  std::string method = "auto";
+  std::string material = "none", backdrop = "light";
   std::string save;
+  bool mask_shots = false, no_multi_view = false;
+  double exposure = 1.0, contact_shadow = 0.0, cast_shadow = 0.0, vignetting = 0.0, falloff = 0.0;
+  std::uint64_t seed = 0;
+  int samples = sim::RenderOptions().samples_per_axis;
   int width = 5184, height = 3456, stops = 16, faces = 4500, resolution = 0, jpeg = 95;
   int max_resolution = recon::VisualHullOptions().max_resolution;
   double voxel_px = recon::VisualHullOptions().voxel_px, size_m = 0.25, noise = 1.5;
@@ -74,7 +84,18 @@ int main(int argc, char** argv) {
       .Option("--max-resolution", &max_resolution,
               "at most this many voxels along the longest side")
       .Option("--faces", &faces, "faces of the optimized mesh")
-      .Option("--method", &method, "silhouettes: key or difference")
+      .Option("--method", &method, "silhouettes: auto, key, difference or backlit")
+      .Flag("--mask-shots", &mask_shots, "render a backlit mask shot beside every photo")
+      .Flag("--no-multi-view", &no_multi_view, "silhouettes without the multi-view step")
+      .Option("--material", &material, "none, white, black, glossy or see-through")
+      .Option("--backdrop", &backdrop, "light (default), white, grey, black or green")
+      .Option("--exposure", &exposure, "exposure of the object and plate")
+      .Option("--contact-shadow", &contact_shadow, "contact shadow on the plate, 0..1")
+      .Option("--cast-shadow", &cast_shadow, "the key light's cast shadow, 0..1")
+      .Option("--vignetting", &vignetting, "lens vignetting in the corners, 0..0.9")
+      .Option("--falloff", &falloff, "backdrop light falloff in the corners, 0..0.9")
+      .Option("--seed", &seed, "render noise seed")
+      .Option("--samples", &samples, "anti-aliasing samples per pixel and axis")
       .Option("--size-m", &size_m, "longest side of the object, metres")
       .Option("--noise", &noise, "render noise sigma, grey levels")
       .Option("--jpeg", &jpeg, "JPEG quality")
@@ -82,8 +103,22 @@ int main(int argc, char** argv) {
       .Option("--save", &save, "folder for masks and meshes, empty = none");
   if (const std::optional<int> exit_code = flags.Parse(std::cout, std::cerr)) return *exit_code;
   try {
-    const sim::Scene scene = MakeScene(scene_name, size_m);
+    sim::Scene scene = MakeScene(scene_name, size_m);
+    scene.OverrideMaterials(sim::ParseMaterialOverride(material));
     sim::SimViewsOptions sim_options;
+    if (backdrop != "light") {
+      const Eigen::Vector3d colour = studio::ParseBackdropColour(backdrop, "backdrop");
+      sim_options.render.backdrop_top = colour;
+      sim_options.render.backdrop_bottom = 0.9 * colour;
+    }
+    sim_options.render.exposure = exposure;
+    sim_options.render.contact_shadow = contact_shadow;
+    sim_options.render.cast_shadow = cast_shadow;
+    sim_options.render.vignetting = vignetting;
+    sim_options.render.backdrop_falloff = falloff;
+    sim_options.render.seed = seed;
+    sim_options.render.samples_per_axis = samples;
+    sim_options.mask_shots = mask_shots;
     sim_options.rig.width = width;
     sim_options.rig.height = height;
     sim_options.stops = stops;
@@ -104,9 +139,10 @@ int main(int argc, char** argv) {
     });
     // The yardstick: decoding the same photos as JPEG files, in parallel as the silhouettes
     // run (issue 20: silhouettes within 2x of it).
-    std::vector<std::vector<std::uint8_t>> jpegs(sim_views.views.size());
+    const std::vector<View>& inputs = mask_shots ? sim_views.mask_shots : sim_views.views;
+    std::vector<std::vector<std::uint8_t>> jpegs(inputs.size());
     for (std::size_t i = 0; i < jpegs.size(); ++i)
-      cv::imencode(".jpg", sim_views.views[i].Image(), jpegs[i], {cv::IMWRITE_JPEG_QUALITY, 95});
+      cv::imencode(".jpg", inputs[i].Image(), jpegs[i], {cv::IMWRITE_JPEG_QUALITY, 95});
     Stopwatch decode_watch;
     ParallelFor(jpegs.size(), 1, 0, [&](std::size_t begin, std::size_t end) {
       for (std::size_t i = begin; i < end; ++i) {
@@ -119,8 +155,12 @@ int main(int argc, char** argv) {
     Stopwatch stage;
     recon::SilhouetteOptions silhouette_options;
     silhouette_options.method = recon::ParseSilhouetteMethod(method);
-    const auto silhouettes = recon::ComputeSilhouettes(sim_views.views, sim_views.backgrounds,
-                                                       silhouette_options, progress);
+    silhouette_options.multi_view = !no_multi_view;
+    const auto silhouettes =
+        recon::ComputeSilhouettes(sim_views.views, sim_views.backgrounds, silhouette_options,
+                                  progress, {}, sim_views.mask_shots);
+    const std::string resolved = recon::SilhouetteMethodName(recon::ResolveSilhouetteMethod(
+        silhouette_options.method, sim_views.views.size(), sim_views.mask_shots.size()));
     const double silhouette_seconds = stage.ElapsedSeconds();
     double min_iou = 1.0, sum_iou = 0.0;
     std::string worst_view;
@@ -135,6 +175,9 @@ int main(int argc, char** argv) {
       if (!save.empty()) {
         WriteImage(std::filesystem::path(save) / (sim_views.views[i].name() + "_mask.png"),
                    silhouettes.masks[i]);
+        WriteImage(std::filesystem::path(save) / (sim_views.views[i].name() + "_truth.png"),
+                   sim_views.truth_masks[i]);
+        WriteImage(std::filesystem::path(save) / (inputs[i].name() + ".png"), inputs[i].Image());
         // Where the mask is wrong, at most 1296 pixels wide: red = missed, green = extra.
         const cv::Mat ours = silhouettes.masks[i] >= 128;
         const cv::Mat truth = sim_views.truth_masks[i] >= 128;
@@ -153,7 +196,7 @@ int main(int argc, char** argv) {
     }
     std::printf("decoding the %zu photos as JPEG: %.2f s; silhouettes %.2fx that\n",
                 sim_views.views.size(), decode_seconds, silhouette_seconds / decode_seconds);
-    std::printf("silhouettes (%s): %.2f s; IoU min %.5f (%s), mean %.5f\n", method.c_str(),
+    std::printf("silhouettes (%s): %.2f s; IoU min %.5f (%s), mean %.5f\n", resolved.c_str(),
                 silhouette_seconds, min_iou, worst_view.c_str(),
                 sum_iou / static_cast<double>(sim_views.views.size()));
 

@@ -46,6 +46,24 @@ constexpr double kMinVisiblePlateEdge = 0.1;
 constexpr double kMinObjectFraction = 1e-4;
 // 8-bit level from which a pixel counts as clipped white.
 constexpr int kClippedLevel = 250;
+// Boundary refinement: a pixel whose colour lies farther than this fraction of the object's
+// contrast from the line between its background and object colours is no mix of the two.
+constexpr double kThirdColour = 0.3;
+// ... and it is the background's colour scaled (in linear light) when the scale is within these
+// bounds (a shadow, a sheen) and its chromaticity within this fraction of its brightness.
+constexpr double kMinBackgroundScale = 0.2;
+constexpr double kMaxBackgroundScale = 1.4;
+constexpr double kMaxBackgroundChroma = 0.15;
+// The second matting pass takes the colours either side from at most this far, pixels.
+constexpr float kLocalReach = 2.0f;
+// A mask shot's lit panel is at least this bright (8-bit levels at the centre).
+constexpr double kMinBacklitLevel = 96.0;
+// A hole the object encloses in a mask shot whose mean alpha reaches this lets the panel
+// through dimmed: a see-through part, filled.
+constexpr float kSeeThroughAlpha = 0.06f;
+// A mask shot whose darkest part lets more than this fraction of the panel's light through
+// shows no object.
+constexpr float kMaxSeeThroughRatio = 0.9f;
 
 // A smooth colour model c(x, y) = sum_k coeff_k * basis_k(x, y), per channel, with x and y
 // normalised to [-1, 1] over the image.
@@ -295,7 +313,10 @@ int RemoveSmallComponents(cv::Mat* fg, double min_fraction, int* kept) {
   return largest;
 }
 
-void FillSmallHoles(cv::Mat* fg, double max_area) {
+// Fills the background holes of at most `max_area` pixels that the object encloses, but not
+// those mostly of the backdrop's own colour (`backdrop`, CV_8UC1, 255 where the colour test
+// found the expected background; optional): an opening (a tab's loop) stays open.
+void FillSmallHoles(cv::Mat* fg, double max_area, const cv::Mat& backdrop = {}) {
   if (max_area < 1.0) return;
   cv::Mat background = 255 - *fg;
   cv::Mat labels, stats, centroids;
@@ -308,6 +329,18 @@ void FillSmallHoles(cv::Mat* fg, double max_area) {
     const int h = stats.at<int>(i, cv::CC_STAT_HEIGHT);
     const bool touches_border = x == 0 || y == 0 || x + w == fg->cols || y + h == fg->rows;
     if (!touches_border && stats.at<int>(i, cv::CC_STAT_AREA) <= max_area) fill[i] = 255;
+  }
+  if (!backdrop.empty()) {
+    std::vector<int> plain(static_cast<std::size_t>(n), 0);
+    for (int y = 0; y < fg->rows; ++y) {
+      const int* l = labels.ptr<int>(y);
+      const std::uint8_t* b = backdrop.ptr<std::uint8_t>(y);
+      for (int x = 0; x < fg->cols; ++x)
+        if (fill[l[x]] && b[x]) ++plain[static_cast<std::size_t>(l[x])];
+    }
+    for (int i = 1; i < n; ++i)
+      if (fill[i] && 2 * plain[static_cast<std::size_t>(i)] >= stats.at<int>(i, cv::CC_STAT_AREA))
+        fill[i] = 0;
   }
   for (int y = 0; y < fg->rows; ++y) {
     const int* l = labels.ptr<int>(y);
@@ -587,7 +620,7 @@ void CheckExposure(const cv::Mat& image, const cv::Mat& fg, const std::string& n
 // For each pixel, the colour (of `smooth`, CV_32FC3) at the nearest pixel marked in `sure`
 // (CV_8UC1, 255): the local colour of one side of an outline, taken where that side is surely
 // itself and nearest the pixel, so shading across the object does not bias it.
-cv::Mat NearestColour(const cv::Mat& smooth, const cv::Mat& sure) {
+cv::Mat NearestColour(const cv::Mat& smooth, const cv::Mat& sure, cv::Mat* distance_out = nullptr) {
   cv::Mat distance, labels;
   cv::distanceTransform(~sure, distance, labels, cv::DIST_L2, cv::DIST_MASK_5,
                         cv::DIST_LABEL_PIXEL);
@@ -613,17 +646,95 @@ cv::Mat NearestColour(const cv::Mat& smooth, const cv::Mat& sure) {
       out[x] = k < colour_of_label.size() ? colour_of_label[k] : cv::Vec3f();
     }
   }
+  if (distance_out != nullptr) *distance_out = distance;
   return nearest;
+}
+
+// An 8-bit sRGB level as linear light (0..255 scale).
+float LinearLevel(float srgb) {
+  const double c = std::clamp(srgb / 255.0, 0.0, 1.0);
+  return static_cast<float>(255.0 *
+                            (c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4)));
+}
+
+// Linear light (0..255 scale) back to sRGB codes (0..255).
+cv::Vec3f SrgbCode(const cv::Vec3f& linear) {
+  cv::Vec3f code;
+  for (int c = 0; c < 3; ++c) {
+    const double l = std::clamp(linear[c] / 255.0, 0.0, 1.0);
+    code[c] = static_cast<float>(
+        255.0 * (l <= 0.0031308 ? 12.92 * l : 1.055 * std::pow(l, 1.0 / 2.4) - 0.055));
+  }
+  return code;
+}
+
+// A photo's 8-bit sRGB colours as linear light (0..255 scale, CV_32FC3): where the object
+// covers part of a pixel, the sensor mixed the two colours' light, not their sRGB codes (a
+// half-covered pixel before a light backdrop looks lighter than halfway in sRGB).
+cv::Mat LinearColour(const cv::Mat& bgr) {
+  static const std::array<float, 256> table = [] {
+    std::array<float, 256> t{};
+    for (int i = 0; i < 256; ++i) {
+      const double c = i / 255.0;
+      t[static_cast<std::size_t>(i)] = static_cast<float>(
+          255.0 * (c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4)));
+    }
+    return t;
+  }();
+  cv::Mat out(bgr.size(), CV_32FC3);
+  for (int y = 0; y < bgr.rows; ++y) {
+    const auto* in = bgr.ptr<cv::Vec3b>(y);
+    auto* o = out.ptr<cv::Vec3f>(y);
+    for (int x = 0; x < bgr.cols; ++x)
+      o[x] = cv::Vec3f(table[in[x][0]], table[in[x][1]], table[in[x][2]]);
+  }
+  return out;
+}
+
+// Whether linear colour i is background colour b scaled (a shadow on it, a sheen), within a
+// chromaticity distortion of kMaxBackgroundChroma of b's brightness.
+bool BackgroundLike(const cv::Vec3f& i, const cv::Vec3f& b) {
+  const double bb = b.dot(b);
+  if (bb < 1e-6) return i.dot(i) < 4.0;
+  const double k = i.dot(b) / bb;
+  if (k < kMinBackgroundScale || k > kMaxBackgroundScale) return false;
+  const cv::Vec3f off = i - b * static_cast<float>(k);
+  return off.dot(off) <= kMaxBackgroundChroma * kMaxBackgroundChroma * k * k * bb;
+}
+
+// A pixel's coverage by the object from its colour i and the object's and the background's
+// colours f and b beside it (linear light): alpha = <i - b, f - b> / |f - b|^2, 8-bit, into
+// *out; unchanged where f and b differ by less than `min_contrast`. A colour that is no mix of
+// the two is a rim of another colour than the object's inside (a label's edge, a seam): object,
+// unless it is the background darkened or lightened (a shadow, the backdrop's sheen); with
+// `third_colours` false such a pixel keeps its value.
+void MatteAlpha(const cv::Vec3f& i, const cv::Vec3f& f, const cv::Vec3f& b, double min_contrast,
+                bool third_colours, std::uint8_t* out) {
+  const cv::Vec3f fb = f - b;
+  const double contrast_sq = fb.dot(fb);
+  // Enough contrast to matte, judged as the photo's noise is: in 8-bit sRGB levels.
+  const cv::Vec3f code_difference = SrgbCode(f) - SrgbCode(b);
+  if (code_difference.dot(code_difference) < min_contrast * min_contrast) return;
+  const cv::Vec3f ib = i - b;
+  const double alpha = std::clamp(ib.dot(fb) / contrast_sq, 0.0, 1.0);
+  const cv::Vec3f residual = ib - fb * static_cast<float>(alpha);
+  if (residual.dot(residual) > kThirdColour * kThirdColour * contrast_sq) {
+    if (third_colours) *out = BackgroundLike(i, b) ? 0 : 255;
+    return;
+  }
+  *out = cv::saturate_cast<std::uint8_t>(255.0 * alpha);
 }
 
 // Boundary refinement to an alpha matte: in a band around the outline, each pixel's coverage
 // alpha = <I - B, F - B> / |F - B|^2 with F and B the object's and the background's colours
-// nearest to it where each is sure (just beyond the band), 8-bit; elsewhere 0 or 255. Done
+// nearest to it where each is sure (just beyond the band), in linear light, 8-bit; elsewhere 0
+// or 255. Done
 // tile by tile, only where the outline passes (a photo's object is mostly not outline); a
 // tile is processed with a margin that holds the band's reach and the sure colours beyond it,
 // and where a side has no sure pixel within it (a part thinner than the band) the binary
 // mask stays.
-void RefineToAlpha(const cv::Mat& image, const SilhouetteOptions& options, cv::Mat* fg) {
+void RefineToAlpha(const cv::Mat& image, const SilhouetteOptions& options, bool third_colours,
+                   cv::Mat* fg) {
   // The band covers the graph cut's working-resolution step.
   const int band =
       1 +
@@ -665,8 +776,8 @@ void RefineToAlpha(const cv::Mat& image, const SilhouetteOptions& options, cv::M
         grown.setTo(255, edge);
       }
       if (cv::countNonZero(shrunk) == 0 || cv::countNonZero(grown) == region.area()) continue;
-      cv::Mat colour, smooth;
-      image(region).convertTo(colour, CV_32FC3);
+      const cv::Mat colour = LinearColour(image(region));
+      cv::Mat smooth;
       cv::blur(colour, smooth, cv::Size(3, 3));
       const cv::Mat object = NearestColour(smooth, shrunk);
       const cv::Mat background = NearestColour(smooth, ~grown);
@@ -681,11 +792,42 @@ void RefineToAlpha(const cv::Mat& image, const SilhouetteOptions& options, cv::M
         auto* out = fg->ptr<std::uint8_t>(core.y + y) + core.x;
         for (int x = 0; x < core.width; ++x) {
           if (!g[x] || sh[x]) continue;
-          const cv::Vec3f fb = f_row[x] - b_row[x];
-          const double contrast_sq = fb.dot(fb);
-          if (contrast_sq < min_contrast * min_contrast) continue;
-          const double alpha = (i_row[x] - b_row[x]).dot(fb) / contrast_sq;
-          out[x] = cv::saturate_cast<std::uint8_t>(255.0 * std::clamp(alpha, 0.0, 1.0));
+          MatteAlpha(i_row[x], f_row[x], b_row[x], min_contrast, third_colours, &out[x]);
+        }
+      }
+    }
+  }
+  // Second pass: each partly covered pixel matted again against the colours right at the
+  // outline (the nearest pixels the first pass found wholly object and wholly background, if
+  // within kLocalReach): an edge lit otherwise than the inside (a rim glow before a lit panel,
+  // a grazing highlight, a shaded crease) is matted against its own colour.
+  const cv::Mat first = fg->clone();
+  for (int ty = roi.y; ty < roi.br().y; ty += kTile) {
+    for (int tx = roi.x; tx < roi.br().x; tx += kTile) {
+      const cv::Rect core = cv::Rect(tx, ty, kTile, kTile) & roi;
+      const cv::Mat core_first = first(core);
+      if (cv::countNonZero((core_first > 0) & (core_first < 255)) == 0) continue;
+      const int margin = kLocalReach + 1;
+      const cv::Rect region = cv::Rect(core.x - margin, core.y - margin, core.width + 2 * margin,
+                                       core.height + 2 * margin) &
+                              frame;
+      const cv::Mat colour = LinearColour(image(region));
+      cv::Mat object_distance, background_distance;
+      const cv::Mat object = NearestColour(colour, first(region) == 255, &object_distance);
+      const cv::Mat background = NearestColour(colour, first(region) == 0, &background_distance);
+      const cv::Point offset = core.tl() - region.tl();
+      for (int y = 0; y < core.height; ++y) {
+        const int ry = y + offset.y;
+        const auto* a = first.ptr<std::uint8_t>(core.y + y) + core.x;
+        const auto* od = object_distance.ptr<float>(ry) + offset.x;
+        const auto* bd = background_distance.ptr<float>(ry) + offset.x;
+        const auto* f_row = object.ptr<cv::Vec3f>(ry) + offset.x;
+        const auto* b_row = background.ptr<cv::Vec3f>(ry) + offset.x;
+        const auto* i_row = colour.ptr<cv::Vec3f>(ry) + offset.x;
+        auto* out = fg->ptr<std::uint8_t>(core.y + y) + core.x;
+        for (int x = 0; x < core.width; ++x) {
+          if (a[x] == 0 || a[x] == 255 || od[x] > kLocalReach || bd[x] > kLocalReach) continue;
+          MatteAlpha(i_row[x], f_row[x], b_row[x], min_contrast, third_colours, &out[x]);
         }
       }
     }
@@ -695,13 +837,32 @@ void RefineToAlpha(const cv::Mat& image, const SilhouetteOptions& options, cv::M
 }  // namespace
 
 SilhouetteMethod ParseSilhouetteMethod(const std::string& name) {
+  if (name == "auto") return SilhouetteMethod::kAuto;
   if (name == "key") return SilhouetteMethod::kKey;
   if (name == "difference") return SilhouetteMethod::kDifference;
-  throw InvalidArgument("unknown silhouette method '" + name + "' (expected key or difference)");
+  if (name == "backlit") return SilhouetteMethod::kBacklit;
+  throw InvalidArgument("unknown silhouette method '" + name +
+                        "' (expected auto, key, difference or backlit)");
 }
 
 const char* SilhouetteMethodName(SilhouetteMethod method) {
-  return method == SilhouetteMethod::kKey ? "key" : "difference";
+  switch (method) {
+    case SilhouetteMethod::kAuto:
+      return "auto";
+    case SilhouetteMethod::kKey:
+      return "key";
+    case SilhouetteMethod::kDifference:
+      return "difference";
+    case SilhouetteMethod::kBacklit:
+      return "backlit";
+  }
+  return "?";
+}
+
+SilhouetteMethod ResolveSilhouetteMethod(SilhouetteMethod method, std::size_t views,
+                                         std::size_t mask_shots) {
+  if (method != SilhouetteMethod::kAuto) return method;
+  return views > 0 && mask_shots == views ? SilhouetteMethod::kBacklit : SilhouetteMethod::kKey;
 }
 
 const OptionTable<SilhouetteOptions>& SilhouetteOptions::Fields() {
@@ -710,9 +871,14 @@ const OptionTable<SilhouetteOptions>& SilhouetteOptions::Fields() {
     OptionTable<O> t;
     t.AddChoice(&O::method,
                 {.name = "method",
-                 .help = "silhouettes by keying against the backdrop, or by differencing against "
-                         "background plates (backgrounds/cam<C>.jpg)"},
-                {{"key", SilhouetteMethod::kKey}, {"difference", SilhouetteMethod::kDifference}});
+                 .help = "silhouettes from the backlit mask shots (backlit), by keying against "
+                         "the backdrop (key), or by differencing against background plates "
+                         "(difference: backgrounds/cam<C>.jpg); auto: backlit when the session "
+                         "has mask shots, else key"},
+                {{"auto", SilhouetteMethod::kAuto},
+                 {"key", SilhouetteMethod::kKey},
+                 {"difference", SilhouetteMethod::kDifference},
+                 {"backlit", SilhouetteMethod::kBacklit}});
     t.Add(&O::noise_threshold, {.name = "noise-threshold",
                                 .help = "colour distance that is always background (noise, JPEG)",
                                 .unit = "8-bit levels",
@@ -916,6 +1082,7 @@ cv::Mat SegmentAtWorkingSize(const cv::Mat& image, const CameraModel& camera,
     return backdrop.At(nx, ny);
   };
   double largest = 0.0;
+  const cv::Mat backdrop_colour = fg == 0;  // what the colour test took for the background
   fg = SegmentByGraphCut(image, fg, expected, options, prior, name, &largest);
   RemoveSmallComponents(&fg, options.min_component_fraction, &components);
   const double object_area = cv::countNonZero(fg);
@@ -937,7 +1104,7 @@ cv::Mat SegmentAtWorkingSize(const cv::Mat& image, const CameraModel& camera,
     throw FormatError(name,
                       "no object found: the photo shows only the backdrop (or the object "
                       "matches it everywhere)");
-  FillSmallHoles(&fg, options.max_hole_fraction * object_area);
+  FillSmallHoles(&fg, options.max_hole_fraction * object_area, backdrop_colour);
   if (options.check_border) CheckClearOfBorder(fg, name);
   CheckExposure(image, fg, name);
   if (stats != nullptr) {
@@ -947,11 +1114,157 @@ cv::Mat SegmentAtWorkingSize(const cv::Mat& image, const CameraModel& camera,
   return fg;
 }
 
+// The prior's decisions (OthersHullPriors' codes): 0 = not object, 255 = object.
+void ApplyPrior(const cv::Mat& prior, cv::Mat* fg) {
+  if (prior.empty()) return;
+  fg->setTo(0, prior == 0);
+  fg->setTo(255, prior == 255);
+}
+
+// The silhouette in a backlit mask shot at its working size (kBacklit): binary, before the
+// boundary refinement.
+cv::Mat SegmentBacklitAtWorkingSize(const cv::Mat& image, const SilhouetteOptions& options,
+                                    const std::string& name, SilhouetteStats* stats,
+                                    const cv::Mat& prior) {
+  const int width = image.cols;
+  const int height = image.rows;
+  // The lit panel: a smooth model fitted from the border inwards, the product's dark pixels
+  // rejected (as the keyed backdrop's).
+  ColourModel panel;
+  {
+    const double scale = std::min(1.0, static_cast<double>(kFitSize) / std::max(width, height));
+    cv::Mat small;
+    cv::resize(image, small, cv::Size(), scale, scale, cv::INTER_AREA);
+    std::vector<Sample> samples;
+    std::vector<bool> seed;
+    const int border = std::max(2, small.cols / 12);
+    for (int y = 0; y < small.rows; ++y) {
+      for (int x = 0; x < small.cols; ++x) {
+        const auto& c = small.at<cv::Vec3b>(y, x);
+        samples.push_back({((x + 0.5) / scale) / width * 2.0 - 1.0,
+                           ((y + 0.5) / scale) / height * 2.0 - 1.0, cv::Vec3f(c[0], c[1], c[2])});
+        seed.push_back(x < border || y < border || x >= small.cols - border ||
+                       y >= small.rows - border);
+      }
+    }
+    const double floor = std::max(12.0, 2.0 * options.noise_threshold);
+    if (!FitColourModel(samples, seed, 6, floor, std::max<std::size_t>(50, samples.size() / 10),
+                        &panel))
+      throw FormatError(name,
+                        "no lit backdrop in the mask shot: fewer than 10% of its pixels agree "
+                        "with a smooth bright panel (is the backlight on, the product framed "
+                        "with a margin?)");
+  }
+  const cv::Vec3f centre = panel.At(0.0, 0.0);
+  const double centre_level = (centre[0] + centre[1] + centre[2]) / 3.0;
+  if (centre_level < kMinBacklitLevel) {
+    std::ostringstream reason;
+    reason << "the mask shot's backdrop is dark (" << cvRound(centre_level)
+           << " of 255 at the centre): the backlight did not light it";
+    throw FormatError(name, reason.str());
+  }
+  // Per pixel, in linear light: the shot's brightness as a fraction r of the panel's there.
+  // The product's fraction from its surely dark pixels (r < 0.5), or, when it lets most of the
+  // light through (glass, clear plastic), from its darkest: its outline.
+  cv::Mat ratio(height, width, CV_32FC1);
+  std::vector<cv::Vec3f> row(width);
+  std::vector<float> sampled;
+  sampled.reserve(static_cast<std::size_t>(width) * height / 3 + 1);
+  {
+    const cv::Mat linear = LinearColour(image);
+    for (int y = 0; y < height; ++y) {
+      EvaluateRow(panel, (y + 0.5) / height * 2.0 - 1.0, width, &row);
+      const auto* in = linear.ptr<cv::Vec3f>(y);
+      auto* r = ratio.ptr<float>(y);
+      for (int x = 0; x < width; ++x) {
+        const float p = LinearLevel((row[x][0] + row[x][1] + row[x][2]) / 3.0f);
+        r[x] = (in[x][0] + in[x][1] + in[x][2]) / (3.0f * std::max(p, 1.0f));
+        if ((x + y) % 3 == 0) sampled.push_back(r[x]);
+      }
+    }
+  }
+  std::sort(sampled.begin(), sampled.end());
+  const auto dark = static_cast<std::size_t>(
+      std::lower_bound(sampled.begin(), sampled.end(), 0.5f) - sampled.begin());
+  const std::size_t min_dark = std::max<std::size_t>(20, sampled.size() / 2000);
+  const float object_ratio =
+      dark >= min_dark ? sampled[dark / 2] : sampled[std::min(sampled.size() - 1, min_dark / 4)];
+  if (object_ratio > kMaxSeeThroughRatio)
+    throw FormatError(name,
+                      "no object found: the mask shot shows only the lit panel (or the "
+                      "product lets all of its light through)");
+  cv::Mat alpha(height, width, CV_32FC1);
+  for (int y = 0; y < height; ++y) {
+    const auto* r = ratio.ptr<float>(y);
+    auto* a = alpha.ptr<float>(y);
+    for (int x = 0; x < width; ++x)
+      a[x] = std::clamp((1.0f - r[x]) / (1.0f - object_ratio), 0.0f, 1.0f);
+  }
+  cv::Mat fg = alpha >= 0.5f;
+  int components = 0;
+  RemoveSmallComponents(&fg, options.min_component_fraction, &components);
+  double object_area = cv::countNonZero(fg);
+  if (object_area < kMinObjectFraction * static_cast<double>(fg.total()))
+    throw FormatError(name,
+                      "no object found: the mask shot shows only the lit panel (or the "
+                      "product lets all of its light through)");
+  // Holes the object encloses: a see-through part dims the panel behind it (filled: the
+  // product is solid there), an opening shows it as it is (kept).
+  {
+    cv::Mat background = ~fg;
+    cv::Mat labels, stats_mat, centroids;
+    const int n =
+        cv::connectedComponentsWithStats(background, labels, stats_mat, centroids, 4, CV_32S);
+    std::vector<double> alpha_sum(static_cast<std::size_t>(n), 0.0);
+    for (int y = 0; y < height; ++y) {
+      const int* l = labels.ptr<int>(y);
+      const float* a = alpha.ptr<float>(y);
+      for (int x = 0; x < width; ++x) alpha_sum[static_cast<std::size_t>(l[x])] += a[x];
+    }
+    std::vector<std::uint8_t> fill(static_cast<std::size_t>(n), 0);
+    const double max_small = options.max_hole_fraction * object_area;
+    for (int i = 1; i < n; ++i) {
+      const int x = stats_mat.at<int>(i, cv::CC_STAT_LEFT);
+      const int y = stats_mat.at<int>(i, cv::CC_STAT_TOP);
+      const int w = stats_mat.at<int>(i, cv::CC_STAT_WIDTH);
+      const int h = stats_mat.at<int>(i, cv::CC_STAT_HEIGHT);
+      if (x == 0 || y == 0 || x + w == width || y + h == height) continue;  // open backdrop
+      const double area = stats_mat.at<int>(i, cv::CC_STAT_AREA);
+      const double mean_alpha = alpha_sum[static_cast<std::size_t>(i)] / area;
+      if (area <= max_small || mean_alpha >= kSeeThroughAlpha)
+        fill[static_cast<std::size_t>(i)] = 255;
+    }
+    for (int y = 0; y < height; ++y) {
+      const int* l = labels.ptr<int>(y);
+      std::uint8_t* m = fg.ptr<std::uint8_t>(y);
+      for (int x = 0; x < width; ++x)
+        m[x] = static_cast<std::uint8_t>(m[x] | fill[static_cast<std::size_t>(l[x])]);
+    }
+  }
+  if (!prior.empty()) {
+    // The other views' hull removes what lies outside it; what lies deep inside it is object
+    // unless this shot sees the lit panel there undimmed (an opening only some views see
+    // through).
+    fg.setTo(0, prior == 0);
+    fg.setTo(255, (prior == 255) & (alpha >= kSeeThroughAlpha));
+  }
+  object_area = cv::countNonZero(fg);
+  if (object_area < kMinObjectFraction * static_cast<double>(fg.total()))
+    throw FormatError(name, "no object found in the mask shot");
+  if (options.check_border) CheckClearOfBorder(fg, name);
+  if (stats != nullptr) {
+    stats->backdrop_residual = panel.rms;
+    stats->components = components;
+  }
+  return fg;
+}
+
 }  // namespace
 
 cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
                           const SilhouetteOptions& options, const cv::Mat& background,
-                          const std::string& name, SilhouetteStats* stats, const cv::Mat& prior) {
+                          const std::string& name, SilhouetteStats* stats, const cv::Mat& prior,
+                          const cv::Mat& photo) {
   options.Validate();
   CAROUSEL_THROW_IF(!prior.empty() && prior.type() != CV_8UC1, InvalidArgument,
                     name << ": the silhouette prior must be 8-bit");
@@ -961,6 +1274,7 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
                     name << ": photo is " << image.cols << "x" << image.rows
                          << " but its camera is " << camera.width << "x" << camera.height);
   const bool difference = options.method == SilhouetteMethod::kDifference;
+  const bool backlit = options.method == SilhouetteMethod::kBacklit;
   if (difference) {
     CAROUSEL_THROW_IF(background.empty(), InvalidArgument,
                       name << ": the difference method needs a background plate (a photo of "
@@ -985,18 +1299,36 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
     if (difference) cv::resize(background, work_background, work_size, 0, 0, cv::INTER_AREA);
     if (!prior.empty()) cv::resize(prior, work_prior, work_size, 0, 0, cv::INTER_NEAREST);
     const cv::Mat work_fg =
-        SegmentAtWorkingSize(work_image, work_camera, options, options.plate_rim_px * work_scale,
-                             work_background, name, stats, work_prior);
+        backlit ? SegmentBacklitAtWorkingSize(work_image, options, name, stats, work_prior)
+                : SegmentAtWorkingSize(work_image, work_camera, options,
+                                       options.plate_rim_px * work_scale, work_background, name,
+                                       stats, work_prior);
     cv::resize(work_fg, fg, image.size(), 0, 0, cv::INTER_LINEAR);
     cv::threshold(fg, fg, 127, 255, cv::THRESH_BINARY);
   } else {
     cv::Mat full_prior = prior;
     if (!prior.empty() && prior.size() != image.size())
       cv::resize(prior, full_prior, image.size(), 0, 0, cv::INTER_NEAREST);
-    fg = SegmentAtWorkingSize(image, camera, options, options.plate_rim_px, background, name, stats,
-                              full_prior);
+    fg = backlit ? SegmentBacklitAtWorkingSize(image, options, name, stats, full_prior)
+                 : SegmentAtWorkingSize(image, camera, options, options.plate_rim_px, background,
+                                        name, stats, full_prior);
   }
-  if (options.refine_boundary) RefineToAlpha(image, options, &fg);
+  if (options.refine_boundary) {
+    if (backlit && !photo.empty()) {
+      // The outline matted in both shots; each pixel takes the larger coverage: a glossy rim
+      // reflects the lit panel in the mask shot (too little coverage there) but the dark studio
+      // in the photo, and a product as light as the backdrop has no contrast in the photo
+      // (where the mask shot's matte stays).
+      // The photo only where its colours are a mix of the two sides (whatever else shows
+      // through an opening there, a shadow, the plate, is not the product's).
+      cv::Mat in_photo = fg.clone();
+      RefineToAlpha(image, options, true, &fg);
+      RefineToAlpha(photo, options, false, &in_photo);
+      fg = cv::max(fg, in_photo);
+    } else {
+      RefineToAlpha(image, options, true, &fg);
+    }
+  }
   if (stats != nullptr)
     stats->object_fraction = cv::countNonZero(fg >= 128) / static_cast<double>(fg.total());
   return fg;
@@ -1004,9 +1336,18 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
 
 SilhouettesResult ComputeSilhouettes(const std::vector<View>& views,
                                      const std::vector<cv::Mat>& backgrounds,
-                                     const SilhouetteOptions& options, Progress& progress,
-                                     const VisualHullOptions& hull) {
-  options.Validate();
+                                     const SilhouetteOptions& requested, Progress& progress,
+                                     const VisualHullOptions& hull,
+                                     const std::vector<View>& mask_shots) {
+  requested.Validate();
+  SilhouetteOptions options = requested;
+  options.method = ResolveSilhouetteMethod(requested.method, views.size(), mask_shots.size());
+  CAROUSEL_THROW_IF(
+      options.method == SilhouetteMethod::kBacklit && mask_shots.size() != views.size(),
+      InvalidArgument,
+      "the backlit method needs a backlit mask shot for each of the "
+          << views.size() << " views (got " << mask_shots.size()
+          << "; capture with --mask-shots backlit)");
   if (options.method == SilhouetteMethod::kDifference) {
     CAROUSEL_THROW_IF(backgrounds.size() != views.size(), InvalidArgument,
                       "the difference method needs a background plate for each of the "
@@ -1023,21 +1364,28 @@ SilhouettesResult ComputeSilhouettes(const std::vector<View>& views,
       const View& view = views[i];
       const cv::Mat background =
           options.method == SilhouetteMethod::kDifference ? backgrounds[i] : cv::Mat();
-      result.masks[i] = ComputeSilhouette(view.Image(), view.camera(), options, background,
-                                          view.name(), &result.stats[i]);
+      const View& source = options.method == SilhouetteMethod::kBacklit ? mask_shots[i] : view;
+      const bool backlit = options.method == SilhouetteMethod::kBacklit;
+      result.masks[i] =
+          ComputeSilhouette(source.Image(), view.camera(), options, background, source.name(),
+                            &result.stats[i], {}, backlit ? view.Image() : cv::Mat());
+      source.ReleasePixels();
       view.ReleasePixels();
       progress.Report(++done, views.size());
     }
   });
   progress.EndStage();
   if (options.multi_view && views.size() >= kMinConsistencyViews)
-    MakeConsistent(views, backgrounds, options, hull, &result, progress);
+    MakeConsistent(views, backgrounds, options, hull, &result, progress, mask_shots);
   return result;
 }
 
 void MakeConsistent(const std::vector<View>& views, const std::vector<cv::Mat>& backgrounds,
-                    const SilhouetteOptions& options, const VisualHullOptions& hull,
-                    SilhouettesResult* result, Progress& progress) {
+                    const SilhouetteOptions& requested, const VisualHullOptions& hull,
+                    SilhouettesResult* result, Progress& progress,
+                    const std::vector<View>& mask_shots) {
+  SilhouetteOptions options = requested;
+  options.method = ResolveSilhouetteMethod(requested.method, views.size(), mask_shots.size());
   VisualHullOptions hull_options = hull;
   hull_options.threads = options.threads;
   std::vector<cv::Mat> priors = OthersHullPriors(views, result->masks, hull_options);
@@ -1077,9 +1425,12 @@ void MakeConsistent(const std::vector<View>& views, const std::vector<cv::Mat>& 
       priors[v].setTo(192, (priors[v] == 255) & open_backdrop);
       // Slivers along the outline do not count: the grid is coarse.
       const cv::Mat sliver = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3));
+      // Holes well inside the others' hull count whatever their shape (a highlight along a
+      // glossy lace keyed as backdrop leaves a hair-thin hole).
       cv::Mat spill_map, hole_map;
       cv::erode(object & (priors[v] == 0), spill_map, sliver);
       cv::erode(~object & ~open_backdrop & (priors[v] >= 192), hole_map, sliver);
+      hole_map |= ~object & ~open_backdrop & (priors[v] == 255);
       const int spill = cv::countNonZero(spill_map);
       const int hole = cv::countNonZero(hole_map);
       result->stats[v].outside_others = spill;
@@ -1115,9 +1466,20 @@ void MakeConsistent(const std::vector<View>& views, const std::vector<cv::Mat>& 
           options.method == SilhouetteMethod::kDifference ? backgrounds[v] : cv::Mat();
       SilhouetteStats stats = result->stats[v];
       const cv::Mat before = result->masks[v] >= 128;
-      result->masks[v] = ComputeSilhouette(view.Image(), view.camera(), options, background,
-                                           view.name(), &stats, priors[v]);
-      view.ReleasePixels();
+      if (stats.given) {
+        // A given mask: repaired geometrically, at its own size (nothing to segment again).
+        cv::Mat prior;
+        cv::resize(priors[v], prior, before.size(), 0, 0, cv::INTER_NEAREST);
+        ApplyPrior(prior, &result->masks[v]);
+      } else {
+        const bool backlit = options.method == SilhouetteMethod::kBacklit;
+        const View& source = backlit ? mask_shots[v] : view;
+        result->masks[v] =
+            ComputeSilhouette(source.Image(), view.camera(), options, background, source.name(),
+                              &stats, priors[v], backlit ? view.Image() : cv::Mat());
+        source.ReleasePixels();
+        view.ReleasePixels();
+      }
       const cv::Mat after = result->masks[v] >= 128;
       stats.outside_others = result->stats[v].outside_others;
       stats.hole_in_others = result->stats[v].hole_in_others;

@@ -105,7 +105,7 @@ TEST(CliTest, OptionErrorsNameTheFlag) {
   EXPECT_THAT(faces.err, ::testing::Not(HasSubstr("target_faces")));
   const CliResult method = RunCarousel({"reconstruct", session.c_str(), "--method", "magic"});
   EXPECT_EQ(method.code, kExitUsage);
-  EXPECT_THAT(method.err, HasSubstr("--method must be key or difference"));
+  EXPECT_THAT(method.err, HasSubstr("--method must be auto, key, difference or backlit"));
   const std::string out = (dir.path() / "t").string();
   const CliResult size = RunCarousel({"sim", "capture", "--out", out.c_str(), "--size", "12x"});
   EXPECT_EQ(size.code, kExitUsage);
@@ -325,7 +325,7 @@ TEST(CliTest, TurntableCommandsDriveTheController) {
   const std::string port = controller.port();
   CliResult r = RunCarousel({"turntable", "--port", port.c_str(), "identify"});
   ASSERT_EQ(r.code, kExitOk) << r.err;
-  EXPECT_THAT(r.out, HasSubstr("Carousel TT-328, firmware 1.0.0 (protocol 1.0)"));
+  EXPECT_THAT(r.out, HasSubstr("Carousel TT-328, firmware 1.1.0 (protocol 1.1)"));
   r = RunCarousel({"turntable", "--port", port.c_str(), "goto", "90"});
   ASSERT_EQ(r.code, kExitOk) << r.err;
   EXPECT_THAT(r.out, HasSubstr("angle 90.000 deg (2400 microsteps)"));
@@ -339,6 +339,15 @@ TEST(CliTest, TurntableCommandsDriveTheController) {
       {"turntable", "--port", port.c_str(), "trigger", "--cameras", "0,2", "--ms", "20"});
   ASSERT_EQ(r.code, kExitOk) << r.err;
   EXPECT_THAT(r.out, HasSubstr("shutter outputs 5 on for 20 ms"));
+  r = RunCarousel({"turntable", "--port", port.c_str(), "backlight", "--on"});
+  ASSERT_EQ(r.code, kExitOk) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("backlight on"));
+  EXPECT_TRUE(controller.backlight_on());
+  r = RunCarousel({"turntable", "--port", port.c_str(), "status"});
+  EXPECT_THAT(r.out, HasSubstr("backlight on"));
+  r = RunCarousel({"turntable", "--port", port.c_str(), "backlight", "--off"});
+  EXPECT_THAT(r.out, HasSubstr("backlight off"));
+  EXPECT_FALSE(controller.backlight_on());
   r = RunCarousel({"turntable", "--port", port.c_str(), "spin"});
   EXPECT_EQ(r.code, kExitUsage);
   const std::string missing = (dir.path() / "ttyNONE").string();

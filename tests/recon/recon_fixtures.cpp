@@ -28,7 +28,10 @@ const sim::SimViews& SimulatedCapture(const std::string& name) {
   const std::string material = parts.size() > 1 ? parts[1] : "none";
   const std::string backdrop =
       parts.size() > 2 ? parts[2] : (material == "black" ? "black" : "light");
-  const bool contact_shadow = parts.size() > 3 && parts[3] == "shadow";
+  const std::string flags = parts.size() > 3 ? "+" + parts[3] + "+" : "";
+  auto flag = [&](const char* name) {
+    return flags.find("+" + std::string(name) + "+") != std::string::npos;
+  };
   sim::Scene scene;
   constexpr double kSize = 0.25;
   int stops = 16;
@@ -38,6 +41,11 @@ const sim::SimViews& SimulatedCapture(const std::string& name) {
     scene = sim::MakeRingScene(0.4 * kSize, 0.1 * kSize);
   } else if (base == "sphere") {
     scene = sim::MakeSphereScene(0.5 * kSize, {0.0, 0.0, 0.5 * kSize}, 5);
+  } else if (base == "mug") {
+    scene = sim::MakeMugScene(0.6 * kSize);
+    stops = 12;
+    width = 1296;
+    height = 864;
   } else if (base == "duck") {
     // Wider than the plate, which it hides; an eye's white as light as the backdrop.
     scene = sim::LoadScene(carousel::testing::SharedDataFile("models/Duck/glTF/Duck.gltf"));
@@ -62,8 +70,18 @@ const sim::SimViews& SimulatedCapture(const std::string& name) {
     // that it is not clipped (the backdrop is lit on its own).
     options.render.exposure = 0.65;
   }
-  if (contact_shadow) options.render.contact_shadow = 0.6;
-  if (backdrop == "black") {
+  if (flag("shadow")) options.render.contact_shadow = 0.6;
+  if (flag("studio")) {
+    options.render.cast_shadow = 0.4;
+    options.render.backdrop_falloff = 0.2;
+    options.render.vignetting = 0.2;
+    options.render.samples_per_axis = 3;
+  }
+  options.mask_shots = flag("backlit");
+  if (backdrop == "white") {
+    options.render.backdrop_top = {0.96, 0.96, 0.96};
+    options.render.backdrop_bottom = {0.92, 0.92, 0.92};
+  } else if (backdrop == "black") {
     options.render.backdrop_top = {0.07, 0.07, 0.07};
     options.render.backdrop_bottom = {0.05, 0.05, 0.05};
   } else if (backdrop == "grey") {

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cstdio>
 #include <ostream>
 #include <string>
@@ -11,6 +12,9 @@
 #include <opencv2/imgproc.hpp>
 
 #include "carousel/core/error.h"
+#include "carousel/core/mesh_query.h"
+#include "carousel/recon/mesh_optimization.h"
+#include "carousel/recon/visual_hull.h"
 #include "carousel/sim/renderer.h"
 #include "carousel/sim/test_scenes.h"
 #include "carousel/testing/testing.h"
@@ -54,45 +58,138 @@ INSTANTIATE_TEST_SUITE_P(Scenes, SilhouetteOnScene,
                                   SilhouetteMethodName(param_info.param.second);
                          });
 
-// Hard products (issue 20): a model's materials overridden, keyed with the defaults. Per case,
-// every view's IoU against the exact silhouette, bounds from measurement (worst view: black on
-// black 0.9977, glossy 0.9919, white on grey 0.9965). White on the white backdrop is not here:
-// keyed, its shaded side is a shadow on the sweep to the colour test (IoU 0.36); that takes
-// backlit mask shots.
+// Hard products (issue 20), in a studio as real ones are (the key light's soft cast shadow on
+// the plate and the sweep, the backdrop light's falloff, lens vignetting; 3 x 3 samples per pixel
+// so that the truth has no ties): a model's materials overridden, keyed and from backlit mask
+// shots. Per case, every view's IoU against the exact silhouette (the issue's bounds: 0.995
+// keyed, 0.998 backlit), and the optimized mesh's Chamfer distance to the true surface (bounds
+// from measurement: 1.00..1.11 mm on the bottle, 1.25..1.30 mm on the mug, keyed or backlit;
+// what the visual hull can carve from 12 views at one elevation). White on the white backdrop
+// is backlit only: keyed, its shaded side is a shadow on the sweep to the colour test (IoU
+// 0.36). See-through (glass) keys no better (0.36); backlit, the panel shows dimmed through it.
 struct HardProduct {
-  std::string scene;  // "model/material"
+  std::string scene;  // SimulatedCapture's spec
+  SilhouetteMethod method;
   double min_iou;
+  double max_chamfer_mm;
 };
 
-void PrintTo(const HardProduct& product, std::ostream* out) { *out << product.scene; }
+void PrintTo(const HardProduct& product, std::ostream* out) {
+  *out << product.scene << " " << SilhouetteMethodName(product.method);
+}
+
+// The truth's openings: background pixels the object encloses (a mug's handle).
+cv::Mat Openings(const cv::Mat& truth) {
+  cv::Mat background = truth < 128;
+  cv::Mat labels;
+  const int n = cv::connectedComponents(background, labels, 4, CV_32S);
+  std::vector<std::uint8_t> open(static_cast<std::size_t>(n), 255);
+  for (int x = 0; x < labels.cols; ++x)
+    open[labels.at<int>(0, x)] = open[labels.at<int>(labels.rows - 1, x)] = 0;
+  for (int y = 0; y < labels.rows; ++y)
+    open[labels.at<int>(y, 0)] = open[labels.at<int>(y, labels.cols - 1)] = 0;
+  open[0] = 0;
+  cv::Mat out = cv::Mat::zeros(truth.size(), CV_8UC1);
+  for (int y = 0; y < labels.rows; ++y)
+    for (int x = 0; x < labels.cols; ++x)
+      if (background.at<std::uint8_t>(y, x))
+        out.at<std::uint8_t>(y, x) = open[labels.at<int>(y, x)];
+  return out;
+}
 
 class HardProductSilhouettes : public ::testing::TestWithParam<HardProduct> {};
 
-TEST_P(HardProductSilhouettes, EveryViewMatchesTheTruth) {
+TEST_P(HardProductSilhouettes, MasksAndMeshMatchTheTruth) {
   const HardProduct& product = GetParam();
   const sim::SimViews& capture = testing::SimulatedCapture(product.scene);
+  SilhouetteOptions options;
+  options.method = product.method;
   Progress progress;
-  const SilhouettesResult result = ComputeSilhouettes(capture.views, {}, {}, progress);
+  const SilhouettesResult result =
+      ComputeSilhouettes(capture.views, {}, options, progress, {}, capture.mask_shots);
+  ASSERT_EQ(result.masks.size(), capture.views.size());
   double worst = 1.0, mean = 0.0;
+  int opening_pixels = 0, opening_kept = 0;
   for (std::size_t i = 0; i < capture.views.size(); ++i) {
     const double iou = MaskIoU(result.masks[i], capture.truth_masks[i]);
     EXPECT_GE(iou, product.min_iou) << capture.views[i].name();
     worst = std::min(worst, iou);
     mean += iou / static_cast<double>(capture.views.size());
+    // An opening stays open (at its edges the matte may take a pixel).
+    cv::Mat opening = Openings(capture.truth_masks[i]);
+    cv::erode(opening, opening, cv::getStructuringElement(cv::MORPH_RECT, {3, 3}));
+    opening_pixels += cv::countNonZero(opening);
+    opening_kept += cv::countNonZero(opening & (result.masks[i] < 128));
   }
-  std::printf("%s: IoU worst %.4f, mean %.4f\n", product.scene.c_str(), worst, mean);
+  if (opening_pixels > 0) {
+    EXPECT_GE(opening_kept, 0.98 * opening_pixels);
+  }
+  // The mesh from these silhouettes against the true surface.
+  std::vector<View> views;
+  for (std::size_t i = 0; i < capture.views.size(); ++i) {
+    View view(capture.views[i].camera(), {}, {}, capture.views[i].table_angle_rad());
+    view.set_name(capture.views[i].name());
+    view.SetMask(result.masks[i]);
+    views.push_back(std::move(view));
+  }
+  const VisualHullResult hull = ComputeVisualHull(views, {}, progress);
+  MeshOptimizationOptions mesh_options;
+  mesh_options.target_volume_m3 = hull.volume_m3;
+  const MeshOptimizationResult mesh =
+      OptimizeMesh(hull.OptimizationInput(), mesh_options, progress);
+  const double chamfer_mm = 1e3 * MeasureSurfaceDistance(capture.truth_mesh, mesh.mesh).chamfer();
+  EXPECT_LE(chamfer_mm, product.max_chamfer_mm);
+  std::printf(
+      "%s (%s): IoU worst %.5f, mean %.5f; opening kept %d of %d px; mesh Chamfer %.3f mm\n",
+      product.scene.c_str(), SilhouetteMethodName(product.method), worst, mean, opening_kept,
+      opening_pixels, chamfer_mm);
 }
 
-INSTANTIATE_TEST_SUITE_P(Materials, HardProductSilhouettes,
-                         ::testing::Values(HardProduct{"bottle/white/grey", 0.995},
-                                           HardProduct{"bottle/black", 0.995},
-                                           HardProduct{"bottle/glossy", 0.99},
-                                           HardProduct{"bottle/none/light/shadow", 0.99}),
-                         [](const auto& param_info) {
-                           std::string name = param_info.param.scene;
-                           std::replace(name.begin(), name.end(), '/', '_');
-                           return name;
-                         });
+INSTANTIATE_TEST_SUITE_P(
+    Materials, HardProductSilhouettes,
+    ::testing::Values(
+        HardProduct{"bottle/white/white/studio+backlit", SilhouetteMethod::kBacklit, 0.998, 1.3},
+        HardProduct{"bottle/white/grey/studio", SilhouetteMethod::kKey, 0.995, 1.3},
+        HardProduct{"bottle/black/black/studio+backlit", SilhouetteMethod::kKey, 0.995, 1.3},
+        HardProduct{"bottle/black/black/studio+backlit", SilhouetteMethod::kBacklit, 0.998, 1.3},
+        HardProduct{"bottle/glossy/light/studio+backlit", SilhouetteMethod::kKey, 0.995, 1.3},
+        HardProduct{"bottle/glossy/light/studio+backlit", SilhouetteMethod::kBacklit, 0.998, 1.3},
+        HardProduct{"mug/none/light/studio+backlit", SilhouetteMethod::kKey, 0.995, 1.6},
+        HardProduct{"mug/none/light/studio+backlit", SilhouetteMethod::kBacklit, 0.998, 1.6},
+        HardProduct{"bottle/see-through/light/studio+backlit", SilhouetteMethod::kBacklit, 0.995,
+                    1.4},
+        HardProduct{"bottle/none/light/shadow", SilhouetteMethod::kKey, 0.99, 1.3}),
+    [](const auto& param_info) {
+      std::string name =
+          param_info.param.scene + "_" + SilhouetteMethodName(param_info.param.method);
+      for (char& c : name)
+        if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
+      return name;
+    });
+
+// A backlit mask shot with the backlight off, or of the empty panel, is named; kBacklit
+// without mask shots is refused.
+TEST(SilhouetteTest, BadMaskShotsAreNamed) {
+  const sim::SimViews& capture = testing::SimulatedCapture("bottle/glossy/light/studio+backlit");
+  const View& view = capture.views[0];
+  SilhouetteOptions backlit;
+  backlit.method = SilhouetteMethod::kBacklit;
+  // The photo (front-lit, light backdrop, backlight off) is no mask shot.
+  cv::Mat dark;
+  capture.mask_shots[0].Image().convertTo(dark, CV_8UC3, 0.25);
+  CAROUSEL_EXPECT_THROW_WITH(ComputeSilhouette(dark, view.camera(), backlit, {}, "dark.jpg"),
+                             FormatError, "dark.jpg: the mask shot's backdrop is dark");
+  const cv::Mat panel(view.camera().height, view.camera().width, CV_8UC3, cv::Scalar::all(230));
+  CAROUSEL_EXPECT_THROW_WITH(ComputeSilhouette(panel, view.camera(), backlit, {}, "panel.jpg"),
+                             FormatError, "panel.jpg: no object found");
+  Progress progress;
+  CAROUSEL_EXPECT_THROW_WITH(ComputeSilhouettes(capture.views, {}, backlit, progress),
+                             InvalidArgument, "needs a backlit mask shot for each of the 12 views");
+  // auto takes the mask shots when every view has one, else keys.
+  EXPECT_EQ(ResolveSilhouetteMethod(SilhouetteMethod::kAuto, 12, 12), SilhouetteMethod::kBacklit);
+  EXPECT_EQ(ResolveSilhouetteMethod(SilhouetteMethod::kAuto, 12, 0), SilhouetteMethod::kKey);
+  EXPECT_EQ(ResolveSilhouetteMethod(SilhouetteMethod::kKey, 12, 12), SilhouetteMethod::kKey);
+}
 
 // A zoomed-in copy of a capture's view (fx, fy times `zoom`, the principal point moved by the
 // given fractions of the frame), rendered with noise.

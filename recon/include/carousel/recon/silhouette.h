@@ -14,6 +14,17 @@
 //                rejected as outliers; no extra photo needed.
 //   kDifference  differencing against a background plate: a photo of the empty turntable
 //                taken with the same camera and settings.
+//   kBacklit     no colour test at all: a second photo of the stop with the backlight on (the
+//                panel behind the product and a light-table plate lit, the front lights
+//                dimmed) shows the product dark against a bright panel whatever its colours
+//                (white on white, black, glossy). The panel's level P (a smooth model fitted
+//                from the border, like the backdrop) and the product's F (its dark pixels)
+//                give alpha = (P - L) / (P - F) per pixel (L: the mask shot's brightness);
+//                >= 0.5 is object. A hole the object encloses that lets the panel through
+//                dimmed (a see-through part: glass, clear plastic) is filled; one that shows
+//                the panel as it is (a mug's handle) stays open. Then the same clean-up,
+//                border check and boundary refinement as keying, on the mask shot.
+//   kAuto        (the default) kBacklit when every view comes with a mask shot, else kKey.
 // The turntable plate (a disc of plate_radius_m at z = 0 in the turntable frame, located with
 // the view's camera) is removed: inside its outline B is the plate's colour, fitted robustly
 // like the backdrop, and anti-aliased plate/backdrop rim pixels count as background, so the
@@ -43,15 +54,17 @@
 namespace carousel::recon {
 
 enum class SilhouetteMethod {
+  kAuto,        // backlit mask shots when every view has one, else keying
   kKey,         // keying against the backdrop colour
   kDifference,  // differencing against an empty-turntable background plate
+  kBacklit,     // the backlit mask shot: the product dark against the lit panel
 };
-// "key" / "difference". \throw InvalidArgument for other names.
+// "auto" / "key" / "difference" / "backlit". \throw InvalidArgument for other names.
 SilhouetteMethod ParseSilhouetteMethod(const std::string& name);
 const char* SilhouetteMethodName(SilhouetteMethod method);
 
 struct SilhouetteOptions {
-  SilhouetteMethod method = SilhouetteMethod::kKey;
+  SilhouetteMethod method = SilhouetteMethod::kAuto;
   // Largest colour distance |I - B| that is always background (sensor noise, JPEG), 8-bit
   // levels, >= 0.
   double noise_threshold = 10.0;
@@ -103,19 +116,26 @@ struct SilhouetteStats {
   bool redecided = false;
   int pixels_removed = 0;
   int pixels_added = 0;
+  // The mask was given (a dataset's own, or edited by hand), not segmented: the multi-view
+  // step repairs it geometrically (holes well inside the others' hull filled, spills outside
+  // it removed) instead of segmenting the photo again.
+  bool given = false;
 };
 
 // One photo's silhouette. `background` is the background plate (kDifference; same size,
-// CV_8UC3), ignored by kKey. `name` names the photo in errors. `prior` (optional, CV_8UC1,
+// CV_8UC3), ignored by the other methods; with kBacklit `image` is the photo's backlit mask
+// shot; kAuto keys. `name` names the photo in errors. `prior` (optional, CV_8UC1,
 // the photo's size or a smaller one of its aspect, resized nearest; OthersHullPriors): 0 = not
-// object, 255 = object, 192 = probably object, 128 = the colours decide. \throw InvalidArgument
+// object, 255 = object, 192 = probably object, 128 = the colours decide. `photo` (kBacklit,
+// optional): the photo of the same stop; the outline is matted in both shots and each pixel
+// takes the larger coverage. \throw InvalidArgument
 // (image type, missing background, sizes), FormatError if the photo
 //        shows no backdrop to key against, no object, an object touching the frame's border
 //        (with check_border) or is over-exposed.
 cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
                           const SilhouetteOptions& options, const cv::Mat& background = {},
                           const std::string& name = "image", SilhouetteStats* stats = nullptr,
-                          const cv::Mat& prior = {});
+                          const cv::Mat& prior = {}, const cv::Mat& photo = {});
 
 struct SilhouettesResult {
   std::vector<cv::Mat> masks;  // per view, CV_8UC1
@@ -124,17 +144,26 @@ struct SilhouettesResult {
 
 // Silhouettes for all views (in parallel), then multi-view consistency (options.multi_view).
 // `backgrounds`: per view (kDifference), may share Mats between the views of one camera;
-// empty for kKey. `hull`: the carving the consistency step assumes (floor).
-// \throw as ComputeSilhouette, IoError/FormatError for unreadable photos, Cancelled.
+// empty otherwise. `hull`: the carving the consistency step assumes (floor). `mask_shots`:
+// per view, its backlit mask shot (the view's camera; kBacklit, and kAuto takes them), or
+// empty. \throw as ComputeSilhouette, InvalidArgument (kBacklit without mask shots),
+// IoError/FormatError for unreadable photos, Cancelled.
 SilhouettesResult ComputeSilhouettes(const std::vector<View>& views,
                                      const std::vector<cv::Mat>& backgrounds,
                                      const SilhouetteOptions& options, Progress& progress,
-                                     const VisualHullOptions& hull = {});
+                                     const VisualHullOptions& hull = {},
+                                     const std::vector<View>& mask_shots = {});
 
-// The consistency step alone, on `result` (from the first segmentation of every view).
+// The method ComputeSilhouettes uses for these options and inputs (kAuto resolved).
+SilhouetteMethod ResolveSilhouetteMethod(SilhouetteMethod method, std::size_t views,
+                                         std::size_t mask_shots);
+
+// The consistency step alone, on `result` (from the first segmentation of every view, or
+// given masks: stats[v].given).
 void MakeConsistent(const std::vector<View>& views, const std::vector<cv::Mat>& backgrounds,
                     const SilhouetteOptions& options, const VisualHullOptions& hull,
-                    SilhouettesResult* result, Progress& progress);
+                    SilhouettesResult* result, Progress& progress,
+                    const std::vector<View>& mask_shots = {});
 
 // Intersection over union of two masks (>= 128 = object). \pre same size, CV_8UC1.
 double MaskIoU(const cv::Mat& a, const cv::Mat& b);
