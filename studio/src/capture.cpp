@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <exception>
 #include <future>
 #include <map>
 #include <numbers>
@@ -61,6 +62,10 @@ std::vector<std::optional<T>> JoinAll(std::vector<std::future<T>>& futures,
 
 }  // namespace
 
+std::string MaskShotPath(int camera, int stop) {
+  return "images/" + ViewStem(camera, stop) + kMaskShotSuffix + ".jpg";
+}
+
 // Removes the temporary files atomic writes leave behind when a process is killed.
 void RemoveStaleTemporaries(const std::filesystem::path& folder) {
   std::error_code ec;
@@ -83,40 +88,81 @@ CaptureResult CaptureSession(const std::filesystem::path& folder, Session& sessi
   Stopwatch watch;
   progress.BeginStage("capture");
   const CapturePlan& plan = rig.plan;
+  const bool mask_shots = plan.mask_shots == "backlit";
   const auto move_timeout =
       std::chrono::milliseconds(static_cast<long long>(plan.move_timeout_s * 1000));
   const auto camera_timeout =
       std::chrono::milliseconds(static_cast<long long>(plan.camera_timeout_s * 1000));
   std::filesystem::create_directories(folder / "images");
-  // What is recorded and verified.
+  // What is recorded and verified (a view's photo, and its mask shot when the plan takes them).
   std::map<std::string, SessionView> recorded;
-  for (const SessionView& view : session.views) {
-    const auto file = folder / view.image;
-    if (!view.sha256.empty() && std::filesystem::is_regular_file(file) &&
-        FileSha256(file) == view.sha256) {
-      recorded[view.image] = view;
-      ++result.photos_kept;
-    } else {
-      if (std::filesystem::exists(file)) MoveAside(file);
+  auto verified = [&](const std::string& file, const std::string& sha256) {
+    return !sha256.empty() && std::filesystem::is_regular_file(folder / file) &&
+           FileSha256(folder / file) == sha256;
+  };
+  for (SessionView view : session.views) {
+    if (!verified(view.image, view.sha256)) {
+      if (std::filesystem::exists(folder / view.image)) MoveAside(folder / view.image);
       ++result.photos_retaken;
+      // Its mask shot is checked again when the photo is retaken.
+      continue;
     }
+    ++result.photos_kept;
+    if (!view.mask_shot.empty()) {
+      if (verified(view.mask_shot, view.mask_shot_sha256)) {
+        ++result.photos_kept;
+      } else {
+        if (std::filesystem::exists(folder / view.mask_shot)) MoveAside(folder / view.mask_shot);
+        ++result.photos_retaken;
+        view.mask_shot.clear();
+        view.mask_shot_sha256.clear();
+      }
+    }
+    recorded[view.image] = view;
   }
   session.views.clear();
   for (const auto& [name, view] : recorded) session.views.push_back(view);
   const int cameras = static_cast<int>(rig.cameras.size());
   // A calibration session turns the table once per board placement.
   const int total_stops = plan.stops * placements;
-  const int total = total_stops * cameras;
-  int done = static_cast<int>(recorded.size());
-  auto record = [&](SessionView view) {
-    view.sha256 = FileSha256(folder / view.image);
-    session.views.push_back(view);
-    // The manifest names the photo only now that it is on disk.
+  const int shots_per_view = mask_shots ? 2 : 1;
+  const int total = total_stops * cameras * shots_per_view;
+  int done = 0;
+  for (const SessionView& view : session.views)
+    done += 1 + (mask_shots && !view.mask_shot.empty() ? 1 : 0);
+  // The view of `image` in the manifest (recorded by now).
+  auto view_of = [&](const std::string& image) -> SessionView* {
+    for (SessionView& view : session.views)
+      if (view.image == image) return &view;
+    return nullptr;
+  };
+  // A photo (or mask shot) is on disk: its checksum goes into the manifest, which names it
+  // only now.
+  auto record = [&](const SessionView& view, bool mask_shot) {
+    if (mask_shot) {
+      SessionView* entry = view_of(view.image);
+      CAROUSEL_CHECK(entry != nullptr, "the mask shot's view " << view.image << " is recorded");
+      entry->mask_shot = MaskShotPath(view.camera, view.stop);
+      entry->mask_shot_sha256 = FileSha256(folder / entry->mask_shot);
+    } else {
+      SessionView entry = view;
+      entry.sha256 = FileSha256(folder / entry.image);
+      entry.mask_shot.clear();
+      entry.mask_shot_sha256.clear();
+      session.views.push_back(entry);
+    }
     WriteSessionManifest(folder, session);
     progress.Report(static_cast<std::size_t>(++done), static_cast<std::size_t>(total));
   };
   auto angle_of = [&](int stop) {
     return 2.0 * std::numbers::pi * (stop % plan.stops) / plan.stops;
+  };
+  // One shot of a camera at a stop: its photo, or its backlit mask shot.
+  struct Shot {
+    SessionView view;
+    bool mask_shot = false;
+    std::string file;  // relative
+    std::optional<rig::CapturedPhoto> photo;
   };
   bool homed = false;
   int moving_to = -1;  // the stop the table was last sent to
@@ -124,28 +170,37 @@ CaptureResult CaptureSession(const std::filesystem::path& folder, Session& sessi
   for (int stop = 0; stop < total_stops; ++stop) {
     progress.CheckCancelled();
     const double angle = angle_of(stop);
-    std::vector<SessionView> to_take;
+    std::vector<Shot> to_take;
     for (int c = 0; c < cameras; ++c) {
-      const std::string image = "images/" + ViewStem(c, stop) + ".jpg";
-      if (recorded.count(image) != 0) continue;
       SessionView view;
-      view.image = image;
+      view.image = "images/" + ViewStem(c, stop) + ".jpg";
       view.camera = c;
       view.stop = stop;
       view.table_angle_deg = 360.0 * (stop % plan.stops) / plan.stops;
       view.camera_model = sim::CameraAtTableAngle(rig.cam_from_table[c], angle);
-      const auto file = folder / image;
-      if (std::filesystem::exists(file)) {
-        // On disk but not recorded: a kill between the download and the manifest.
-        if (IsCompletePhoto(file, view.camera_model)) {
-          ++result.photos_adopted;
-          record(view);
-          continue;
+      const auto it = recorded.find(view.image);
+      const bool have_photo = it != recorded.end();
+      if (have_photo) view = it->second;
+      const bool have_mask_shot = !mask_shots || (have_photo && !it->second.mask_shot.empty());
+      for (const bool mask_shot : {false, true}) {
+        if (mask_shot ? have_mask_shot : have_photo) continue;
+        const std::string file = mask_shot ? MaskShotPath(c, stop) : view.image;
+        if (std::filesystem::exists(folder / file)) {
+          // On disk but not recorded: a kill between the download and the manifest. A mask
+          // shot is adopted once its photo is recorded (below, in order).
+          if (IsCompletePhoto(folder / file, view.camera_model) &&
+              (!mask_shot || have_photo || view_of(view.image) != nullptr)) {
+            ++result.photos_adopted;
+            record(view, mask_shot);
+            continue;
+          }
+          // Damaged, or a complete mask shot whose photo is to be retaken (taken again with
+          // it): moved aside, never deleted.
+          MoveAside(folder / file);
+          ++result.photos_retaken;
         }
-        MoveAside(file);
-        ++result.photos_retaken;
+        to_take.push_back({view, mask_shot, file, std::nullopt});
       }
-      to_take.push_back(view);
     }
     if (to_take.empty()) continue;
     if (rig.place_board && stop / plan.stops != placed) {
@@ -161,76 +216,114 @@ CaptureResult CaptureSession(const std::filesystem::path& folder, Session& sessi
     if (moving_to != stop) rig.turntable->StartMoveTo(angle);
     rig.turntable->WaitUntilStopped(move_timeout);
     if (plan.settle_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(plan.settle_ms));
-    // Every camera of this stop fires at once: triggered through libgphoto2, or released
-    // together by the controller's shutter outputs.
-    std::vector<std::future<rig::CapturedPhoto>> shots;
-    shots.reserve(to_take.size());
-    const bool external = static_cast<bool>(rig.release);
-    if (external) {
-      std::vector<int> released;
-      released.reserve(to_take.size());
-      for (const SessionView& view : to_take) {
-        rig.cameras[view.camera]->PrepareExternalRelease(camera_timeout);
-        released.push_back(view.camera);
-      }
-      rig.release(released);
-    }
-    for (const SessionView& view : to_take) {
-      rig::Camera* camera = rig.cameras[view.camera].get();
-      shots.push_back(std::async(std::launch::async, [camera, camera_timeout, external] {
-        return external ? camera->WaitForPhoto(camera_timeout) : camera->Capture(camera_timeout);
-      }));
-    }
     std::exception_ptr error;
-    const std::vector<std::optional<rig::CapturedPhoto>> photos = JoinAll(shots, &error);
-    // Trigger skew: each camera's trigger time after the first one's at this stop.
-    std::optional<std::chrono::steady_clock::time_point> first_trigger;
-    for (const auto& photo : photos) {
-      if (photo && photo->triggered_at != std::chrono::steady_clock::time_point{} &&
-          (!first_trigger || photo->triggered_at < *first_trigger))
-        first_trigger = photo->triggered_at;
+    // Every camera of a phase fires at once: triggered through libgphoto2, or released
+    // together by the controller's shutter outputs. The photos first, then (the backlight on)
+    // the mask shots.
+    auto fire = [&](bool mask_phase) {
+      std::vector<Shot*> shots;
+      for (Shot& shot : to_take)
+        if (shot.mask_shot == mask_phase) shots.push_back(&shot);
+      if (shots.empty() || error) return;
+      std::vector<std::future<rig::CapturedPhoto>> futures;
+      futures.reserve(shots.size());
+      const bool external = static_cast<bool>(rig.release);
+      try {
+        if (external) {
+          std::vector<int> released;
+          released.reserve(shots.size());
+          for (const Shot* shot : shots) {
+            rig.cameras[shot->view.camera]->PrepareExternalRelease(camera_timeout);
+            released.push_back(shot->view.camera);
+          }
+          rig.release(released);
+        }
+      } catch (...) {
+        error = std::current_exception();
+        return;
+      }
+      for (const Shot* shot : shots) {
+        rig::Camera* camera = rig.cameras[shot->view.camera].get();
+        futures.push_back(std::async(std::launch::async, [camera, camera_timeout, external] {
+          return external ? camera->WaitForPhoto(camera_timeout) : camera->Capture(camera_timeout);
+        }));
+      }
+      const std::vector<std::optional<rig::CapturedPhoto>> photos = JoinAll(futures, &error);
+      // Trigger skew: each camera's trigger time after the first one's in this phase.
+      std::optional<std::chrono::steady_clock::time_point> first_trigger;
+      for (const auto& photo : photos) {
+        if (photo && photo->triggered_at != std::chrono::steady_clock::time_point{} &&
+            (!first_trigger || photo->triggered_at < *first_trigger))
+          first_trigger = photo->triggered_at;
+      }
+      double skew_ms = 0.0;
+      for (std::size_t i = 0; i < shots.size(); ++i) {
+        shots[i]->photo = photos[i];
+        if (!photos[i] || !first_trigger ||
+            photos[i]->triggered_at == std::chrono::steady_clock::time_point{})
+          continue;
+        const double offset_ms =
+            std::chrono::duration<double, std::milli>(photos[i]->triggered_at - *first_trigger)
+                .count();
+        if (!mask_phase) shots[i]->view.trigger_offset_ms = offset_ms;
+        skew_ms = std::max(skew_ms, offset_ms);
+      }
+      result.max_trigger_skew_ms = std::max(result.max_trigger_skew_ms, skew_ms);
+      if (shots.size() > 1)
+        CAROUSEL_LOG_INFO("stop " << stop << (mask_phase ? " (mask shots)" : "") << ": "
+                                  << shots.size() << " cameras triggered within " << skew_ms
+                                  << " ms");
+    };
+    fire(false);
+    if (mask_shots && !error) {
+      const bool any = std::any_of(to_take.begin(), to_take.end(),
+                                   [](const Shot& shot) { return shot.mask_shot; });
+      if (any) {
+        try {
+          rig.turntable->SetBacklight(true);
+          if (plan.backlight_settle_ms > 0)
+            std::this_thread::sleep_for(std::chrono::milliseconds(plan.backlight_settle_ms));
+          fire(true);
+        } catch (...) {
+          if (!error) error = std::current_exception();
+        }
+        // Off again whatever happened: the next stop's photos are lit from the front.
+        try {
+          rig.turntable->SetBacklight(false);
+        } catch (...) {
+          if (!error) error = std::current_exception();
+        }
+      }
     }
-    double skew_ms = 0.0;
-    for (std::size_t i = 0; i < to_take.size(); ++i) {
-      if (!photos[i] || !first_trigger ||
-          photos[i]->triggered_at == std::chrono::steady_clock::time_point{})
-        continue;
-      to_take[i].trigger_offset_ms =
-          std::chrono::duration<double, std::milli>(photos[i]->triggered_at - *first_trigger)
-              .count();
-      skew_ms = std::max(skew_ms, to_take[i].trigger_offset_ms);
-    }
-    result.max_trigger_skew_ms = std::max(result.max_trigger_skew_ms, skew_ms);
-    if (to_take.size() > 1)
-      CAROUSEL_LOG_INFO("stop " << stop << ": " << to_take.size() << " cameras triggered within "
-                                << skew_ms << " ms");
     // The table turns to the next stop while the photos download.
     if (!error && stop + 1 < total_stops) {
       rig.turntable->StartMoveTo(angle_of(stop + 1));
       moving_to = stop + 1;
     }
-    std::vector<std::future<int>> downloads;
+    std::vector<std::future<int>> downloads(to_take.size());
     for (std::size_t i = 0; i < to_take.size(); ++i) {
-      if (!photos[i]) continue;
-      rig::Camera* camera = rig.cameras[to_take[i].camera].get();
-      const rig::CapturedPhoto photo = *photos[i];
-      const std::filesystem::path file = folder / to_take[i].image;
+      if (!to_take[i].photo) continue;
+      rig::Camera* camera = rig.cameras[to_take[i].view.camera].get();
+      const rig::CapturedPhoto photo = *to_take[i].photo;
+      const std::filesystem::path file = folder / to_take[i].file;
       const bool remove = plan.delete_from_camera;
-      downloads.push_back(
-          std::async(std::launch::async, [camera, photo, file, remove, camera_timeout] {
-            camera->Download(photo, file, remove, camera_timeout);
-            return 0;
-          }));
+      downloads[i] = std::async(std::launch::async, [camera, photo, file, remove, camera_timeout] {
+        camera->Download(photo, file, remove, camera_timeout);
+        return 0;
+      });
     }
-    std::size_t d = 0;
-    for (std::size_t i = 0; i < to_take.size(); ++i) {
-      if (!photos[i]) continue;
-      try {
-        downloads[d++].get();
-        ++result.photos_taken;
-        record(to_take[i]);
-      } catch (...) {
-        if (!error) error = std::current_exception();
+    // Recorded in order: a view's photo before its mask shot.
+    for (const bool mask_phase : {false, true}) {
+      for (std::size_t i = 0; i < to_take.size(); ++i) {
+        if (to_take[i].mask_shot != mask_phase || !to_take[i].photo) continue;
+        try {
+          downloads[i].get();
+          ++result.photos_taken;
+          if (!mask_phase || view_of(to_take[i].view.image) != nullptr)
+            record(to_take[i].view, mask_phase);
+        } catch (...) {
+          if (!error) error = std::current_exception();
+        }
       }
     }
     if (error) std::rethrow_exception(error);

@@ -127,6 +127,14 @@ std::string ReconstructInputs(const std::filesystem::path& folder, const Session
       changed->push_back(view.image);
     inputs << view.image << ' ' << sha << ' ' << std::setprecision(17) << view.table_angle_deg
            << ' ' << CameraModelToJson(view.camera_model).dump() << '\n';
+    // The silhouettes' own sources: the mask shot, a given mask.
+    for (const auto& [file, recorded] : {std::pair{view.mask_shot, view.mask_shot_sha256},
+                                         std::pair{view.given_mask, view.given_mask_sha256}}) {
+      if (file.empty()) continue;
+      const std::string file_sha = FileSha256(folder / file);
+      if (changed != nullptr && !recorded.empty() && recorded != file_sha) changed->push_back(file);
+      inputs << file << ' ' << file_sha << '\n';
+    }
   }
   inputs << Describe(options);
   return Sha256(inputs.str());
@@ -174,6 +182,8 @@ ProcessResult ProcessSession(const std::filesystem::path& folder, Session& sessi
                              const ProcessOptions& options, Progress& progress) {
   options.Validate();
   ProcessResult result;
+  // A mask edited by hand since the reconstruction is taken as given from now on.
+  const std::vector<std::string> edited_masks = AdoptEditedMasks(folder, session);
   std::vector<std::string> changed_photos;
   const std::string recon_inputs =
       ReconstructInputs(folder, session, options.reconstruct, &changed_photos);
@@ -193,6 +203,14 @@ ProcessResult ProcessSession(const std::filesystem::path& folder, Session& sessi
         (changed_photos.size() > 1 ? " and " + std::to_string(changed_photos.size() - 1) + " more"
                                    : std::string()) +
         " changed since capture (checksum differs from session.json)";
+  }
+  if (!options.force && !edited_masks.empty()) {
+    result.reconstruct_reason =
+        "mask " + edited_masks.front() +
+        (edited_masks.size() > 1 ? " and " + std::to_string(edited_masks.size() - 1) + " more"
+                                 : std::string()) +
+        " edited since the reconstruction (kept under masks/given/ and checked against the other "
+        "views)";
   }
   if (!result.reconstruct_reason.empty()) {
     CAROUSEL_LOG_INFO(folder.string()

@@ -8,12 +8,14 @@
 #include <opencv2/imgproc.hpp>
 
 #include "carousel/core/error.h"
+#include "carousel/core/file_util.h"
 #include "carousel/core/image_io.h"
 #include "carousel/core/logging.h"
 #include "carousel/core/mesh_io.h"
 #include "carousel/core/parallel.h"
 #include "carousel/core/timer.h"
 #include "carousel/recon/reprojection.h"
+#include "carousel/studio/checksum.h"
 #include "carousel/studio/session.h"
 
 namespace carousel::studio {
@@ -119,7 +121,78 @@ std::string ViewList(const std::vector<View>& views, const std::vector<std::size
   return list.str();
 }
 
+// The first silhouettes of every view: given masks as they are, the others segmented (from
+// the photos, the background plates or the mask shots); then the multi-view consistency step
+// over all of them.
+recon::SilhouettesResult FindSilhouettes(const std::filesystem::path& folder,
+                                         const Session& session, const std::vector<View>& views,
+                                         const std::vector<cv::Mat>& backgrounds,
+                                         const std::vector<View>& mask_shots,
+                                         const ReconstructOptions& options, Progress& progress) {
+  std::vector<std::size_t> segmented;
+  for (std::size_t i = 0; i < session.views.size(); ++i)
+    if (session.views[i].given_mask.empty()) segmented.push_back(i);
+  if (segmented.size() == views.size())
+    return recon::ComputeSilhouettes(views, backgrounds, options.silhouettes, progress,
+                                     options.hull, mask_shots);
+  recon::SilhouettesResult result;
+  result.masks.resize(views.size());
+  result.stats.resize(views.size());
+  if (!segmented.empty()) {
+    std::vector<View> sub_views, sub_shots;
+    std::vector<cv::Mat> sub_backgrounds;
+    for (const std::size_t i : segmented) {
+      sub_views.push_back(views[i]);
+      if (!mask_shots.empty()) sub_shots.push_back(mask_shots[i]);
+      if (!backgrounds.empty()) sub_backgrounds.push_back(backgrounds[i]);
+    }
+    recon::SilhouetteOptions first = options.silhouettes;
+    first.multi_view = false;  // below, over every view
+    recon::SilhouettesResult sub = recon::ComputeSilhouettes(sub_views, sub_backgrounds, first,
+                                                             progress, options.hull, sub_shots);
+    for (std::size_t k = 0; k < segmented.size(); ++k) {
+      result.masks[segmented[k]] = sub.masks[k];
+      result.stats[segmented[k]] = sub.stats[k];
+    }
+  }
+  for (std::size_t i = 0; i < views.size(); ++i) {
+    const SessionView& entry = session.views[i];
+    if (entry.given_mask.empty()) continue;
+    const View given(entry.camera_model, folder / entry.image, folder / entry.given_mask);
+    result.masks[i] = given.Mask().clone();
+    result.stats[i].given = true;
+    result.stats[i].object_fraction =
+        cv::countNonZero(result.masks[i] >= 128) / static_cast<double>(result.masks[i].total());
+    if (result.stats[i].object_fraction == 0.0)
+      throw FormatError(folder / entry.given_mask, "the given mask is empty (no object)");
+  }
+  if (options.silhouettes.multi_view && views.size() >= 4)
+    recon::MakeConsistent(views, backgrounds, options.silhouettes, options.hull, &result, progress,
+                          mask_shots);
+  return result;
+}
+
 }  // namespace
+
+std::vector<std::string> AdoptEditedMasks(const std::filesystem::path& folder, Session& session) {
+  std::vector<std::string> edited;
+  for (SessionView& view : session.views) {
+    if (view.mask.empty() || view.mask_sha256.empty()) continue;
+    const std::filesystem::path file = folder / view.mask;
+    if (!std::filesystem::is_regular_file(file) || FileSha256(file) == view.mask_sha256) continue;
+    const std::string given = "masks/given/" + std::filesystem::path(view.mask).filename().string();
+    std::filesystem::create_directories(folder / "masks/given");
+    WriteFileAtomic(folder / given, ReadFileBytes(file));
+    view.given_mask = given;
+    view.given_mask_sha256 = FileSha256(folder / given);
+    view.mask_sha256.clear();
+    edited.push_back(view.mask);
+    CAROUSEL_LOG_WARN(view.mask << " was edited since the reconstruction: kept as " << given
+                                << " and taken as given (checked against the other views)");
+  }
+  if (!edited.empty()) WriteSessionManifest(folder, session);
+  return edited;
+}
 
 const OptionTable<ReconstructOptions>& ReconstructOptions::Fields() {
   static const OptionTable<ReconstructOptions> table =
@@ -156,9 +229,13 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
     options.silhouettes.plate_radius_m = 0.0;
     options.hull.use_floor = false;
   }
+  AdoptEditedMasks(session_folder, session);
   std::vector<View> views = SessionViews(session_folder, session);
+  const std::vector<View> mask_shots = SessionMaskShotViews(session_folder, session);
   ReconstructResult result;
   result.views = static_cast<int>(views.size());
+  result.method = recon::SilhouetteMethodName(
+      recon::ResolveSilhouetteMethod(options.silhouettes.method, views.size(), mask_shots.size()));
 
   // Silhouettes -> masks/.
   Stopwatch watch;
@@ -166,7 +243,11 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
   if (options.silhouettes.method == recon::SilhouetteMethod::kDifference)
     backgrounds = LoadBackgrounds(session_folder, session);
   const recon::SilhouettesResult silhouettes =
-      recon::ComputeSilhouettes(views, backgrounds, options.silhouettes, progress, options.hull);
+      FindSilhouettes(session_folder, session, views, backgrounds, mask_shots, options, progress);
+  result.given_masks =
+      static_cast<int>(std::count_if(silhouettes.stats.begin(), silhouettes.stats.end(),
+                                     [](const recon::SilhouetteStats& s) { return s.given; }));
+  for (const recon::SilhouetteStats& s : silhouettes.stats) result.redecided += s.redecided ? 1 : 0;
   std::filesystem::create_directories(session_folder / "masks");
   result.min_mask_fraction = 1.0;
   // The masks are encoded in parallel (18 MP PNGs take a few tenths of a second each); binary
@@ -182,6 +263,8 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
     const std::string mask =
         "masks/" + std::filesystem::path(session.views[i].image).stem().string() + ".png";
     session.views[i].mask = mask;
+    // A later edit of the mask shows against this (AdoptEditedMasks).
+    session.views[i].mask_sha256 = FileSha256(session_folder / mask);
     views[i].set_mask_path(session_folder / mask);
     views[i].SetMask(silhouettes.masks[i]);
     result.min_mask_fraction =

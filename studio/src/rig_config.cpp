@@ -30,6 +30,11 @@ void CapturePlan::Validate() const {
       "capture.shutter must be \"camera\" or \"controller\", not \"" << shutter << "\"");
   CAROUSEL_THROW_IF(shutter_pulse_ms < 1 || shutter_pulse_ms > 10000, InvalidArgument,
                     "capture.shutter_pulse_ms must be 1..10000");
+  CAROUSEL_THROW_IF(
+      mask_shots != "none" && mask_shots != "backlit", InvalidArgument,
+      "capture.mask_shots must be \"none\" or \"backlit\", not \"" << mask_shots << "\"");
+  CAROUSEL_THROW_IF(backlight_settle_ms < 0 || backlight_settle_ms > 10000, InvalidArgument,
+                    "capture.backlight_settle_ms must be 0..10000");
 }
 
 void RigConfig::Validate() const {
@@ -82,6 +87,8 @@ std::string RigConfigToJsonText(const RigConfig& config) {
               {"delete_from_camera", config.capture.delete_from_camera},
               {"shutter", config.capture.shutter},
               {"shutter_pulse_ms", config.capture.shutter_pulse_ms},
+              {"mask_shots", config.capture.mask_shots},
+              {"backlight_settle_ms", config.capture.backlight_settle_ms},
               {"move_timeout_s", config.capture.move_timeout_s},
               {"camera_timeout_s", config.capture.camera_timeout_s}}},
             {"backdrop", config.backdrop}};
@@ -162,6 +169,9 @@ RigConfig RigConfigFromJsonText(const std::string& text, const std::filesystem::
       capture.OptionalBool("delete_from_camera").value_or(plan.delete_from_camera);
   plan.shutter = capture.OptionalString("shutter").value_or(plan.shutter);
   plan.shutter_pulse_ms = capture.OptionalInt("shutter_pulse_ms").value_or(plan.shutter_pulse_ms);
+  plan.mask_shots = capture.OptionalString("mask_shots").value_or(plan.mask_shots);
+  plan.backlight_settle_ms =
+      capture.OptionalInt("backlight_settle_ms").value_or(plan.backlight_settle_ms);
   plan.move_timeout_s = capture.OptionalNumber("move_timeout_s").value_or(plan.move_timeout_s);
   plan.camera_timeout_s =
       capture.OptionalNumber("camera_timeout_s").value_or(plan.camera_timeout_s);

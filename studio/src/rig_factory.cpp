@@ -93,6 +93,8 @@ RigBackends OpenSimRig(const SimCaptureOptions& sim, const std::optional<Calibra
   rig.turntable = turntable;
   rig.plan.stops = sim.stops;
   rig.plan.settle_ms = 0;
+  rig.plan.mask_shots = sim.mask_shots;
+  rig.plan.backlight_settle_ms = 0;
   return rig;
 }
 
@@ -113,6 +115,8 @@ RigBackends OpenHardwareRig(const RigConfig& config) {
     table->SetConfig(c);
   }
   rig.turntable = table;
+  // Mask shots need the controller's backlight output: named before anything is captured.
+  if (config.capture.mask_shots == "backlit") table->SetBacklight(false);
   if (config.capture.shutter == "controller") {
     const auto pulse = static_cast<std::uint16_t>(config.capture.shutter_pulse_ms);
     rig.release = [table, pulse](const std::vector<int>& cameras) {

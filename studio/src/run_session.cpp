@@ -25,10 +25,12 @@ constexpr const char* kRunFile = "run.json";
 // The rig calibration a session's photos take their cameras from (a copy of --calibration-file).
 constexpr const char* kSessionCalibration = "calibration.json";
 
-// The renderer settings run.json keeps by their flag names.
+// The renderer settings and the capture plan's mask shots, which run.json keeps by their flag
+// names.
 const OptionTable<SimCaptureOptions>& SimRenderFields() {
   static const OptionTable<SimCaptureOptions> table =
-      SimCaptureOptions::Fields().Only({"material", "exposure", "contact-shadow"});
+      SimCaptureOptions::Fields().Only({"material", "exposure", "contact-shadow", "cast-shadow",
+                                        "backdrop-falloff", "vignetting", "mask-shots"});
   return table;
 }
 
@@ -63,7 +65,8 @@ json RunToJson(const RunOptions& o) {
        {{"exclude_views", o.texture.grouping.exclude_views}, {"size", o.texture.atlas.size.size}}},
       {"publish", OptionsToJson(PublishSessionOptions::Fields(), o.publish)},
       {"publish_model", o.publish_model}};
-  // The renderer's look (material, exposure, contact shadow), by their flag names.
+  // The renderer's look (material, exposure, shadows, falloff, vignetting) and the mask shots,
+  // by their flag names.
   run["sim"].update(OptionsToJson(SimRenderFields(), s));
   // The rig as it was when the session started: a resume uses the same devices and plan even
   // if the rig file changed meanwhile.

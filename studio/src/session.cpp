@@ -48,7 +48,12 @@ void WriteSessionManifest(const std::filesystem::path& folder, const Session& se
                   {"table_angle_deg", view.table_angle_deg},
                   {"camera_model", CameraModelToJson(view.camera_model)}};
     if (!view.mask.empty()) entry["mask"] = view.mask;
+    if (!view.mask_sha256.empty()) entry["mask_sha256"] = view.mask_sha256;
     if (!view.sha256.empty()) entry["sha256"] = view.sha256;
+    if (!view.mask_shot.empty()) entry["mask_shot"] = view.mask_shot;
+    if (!view.mask_shot_sha256.empty()) entry["mask_shot_sha256"] = view.mask_shot_sha256;
+    if (!view.given_mask.empty()) entry["given_mask"] = view.given_mask;
+    if (!view.given_mask_sha256.empty()) entry["given_mask_sha256"] = view.given_mask_sha256;
     if (view.trigger_offset_ms >= 0) entry["trigger_offset_ms"] = view.trigger_offset_ms;
     views.push_back(entry);
   }
@@ -100,7 +105,12 @@ Session ReadSession(const std::filesystem::path& folder) {
     SessionView view;
     view.image = entry.RelativePath("image", kFolder);
     view.mask = entry.OptionalRelativePath("mask", kFolder).value_or("");
+    view.mask_sha256 = entry.OptionalString("mask_sha256").value_or("");
     view.sha256 = entry.OptionalString("sha256").value_or("");
+    view.mask_shot = entry.OptionalRelativePath("mask_shot", kFolder).value_or("");
+    view.mask_shot_sha256 = entry.OptionalString("mask_shot_sha256").value_or("");
+    view.given_mask = entry.OptionalRelativePath("given_mask", kFolder).value_or("");
+    view.given_mask_sha256 = entry.OptionalString("given_mask_sha256").value_or("");
     view.trigger_offset_ms = entry.OptionalNumber("trigger_offset_ms").value_or(-1.0);
     view.camera = entry.Int("camera");
     view.stop = entry.Int("stop");
@@ -141,6 +151,17 @@ std::vector<View> SessionViews(const std::filesystem::path& folder, const Sessio
               entry.mask.empty() ? std::filesystem::path() : folder / entry.mask,
               entry.table_angle_deg * std::numbers::pi / 180.0);
     views.push_back(std::move(view));
+  }
+  return views;
+}
+
+std::vector<View> SessionMaskShotViews(const std::filesystem::path& folder,
+                                       const Session& session) {
+  std::vector<View> views;
+  for (const SessionView& entry : session.views) {
+    if (entry.mask_shot.empty()) return {};
+    views.emplace_back(entry.camera_model, folder / entry.mask_shot, std::filesystem::path(),
+                       entry.table_angle_deg * std::numbers::pi / 180.0);
   }
   return views;
 }

@@ -11,6 +11,7 @@
 #include "carousel/core/logging.h"
 #include "carousel/core/mesh_io.h"
 #include "carousel/core/timer.h"
+#include "carousel/studio/capture.h"
 #include "carousel/studio/session.h"
 
 namespace carousel::studio {
@@ -66,9 +67,10 @@ Eigen::Vector3d ParseBackdropColour(const std::string& text, const std::string& 
 
 const std::vector<std::string>& RunSimFieldNames() {
   static const std::vector<std::string> names = {
-      "scene",    "data",     "views",    "size",          "elevations",    "focal-mm",
-      "distance", "noise",    "seed",     "jpeg-quality",  "target-height", "scale",
-      "yaw-deg",  "material", "exposure", "contact-shadow"};
+      "scene",      "data",      "views",    "size",           "elevations",    "focal-mm",
+      "distance",   "noise",     "seed",     "jpeg-quality",   "target-height", "scale",
+      "yaw-deg",    "material",  "exposure", "contact-shadow", "cast-shadow",   "backdrop-falloff",
+      "vignetting", "mask-shots"};
   return names;
 }
 
@@ -139,14 +141,41 @@ const OptionTable<SimCaptureOptions>& SimCaptureOptions::Fields() {
            .min = 0,
            .max = 1},
           [](O& o) -> OptionRef { return &o.render.contact_shadow; });
+    t.Add({.name = "cast-shadow",
+           .help = "the key light's soft shadow on the plate and the sweep: the fraction of the "
+                   "key light it takes away",
+           .min = 0,
+           .max = 1},
+          [](O& o) -> OptionRef { return &o.render.cast_shadow; });
+    t.Add({.name = "backdrop-falloff",
+           .help = "the backdrop light's falloff: how much darker the frame's corners are",
+           .min = 0,
+           .max = 0.9},
+          [](O& o) -> OptionRef { return &o.render.backdrop_falloff; });
+    t.Add({.name = "vignetting",
+           .help = "lens vignetting: the fraction of light lost in the frame's corners",
+           .min = 0,
+           .max = 0.9},
+          [](O& o) -> OptionRef { return &o.render.vignetting; });
     t.AddChoice(&O::material,
                 {.name = "material",
-                 .help = "every material of the model made white, black or glossy (what studios "
-                         "find hard)"},
+                 .help = "every material of the model made white, black, glossy or see-through "
+                         "(what studios find hard)"},
                 {{"none", sim::MaterialOverride::kNone},
                  {"white", sim::MaterialOverride::kWhite},
                  {"black", sim::MaterialOverride::kBlack},
-                 {"glossy", sim::MaterialOverride::kGlossy}});
+                 {"glossy", sim::MaterialOverride::kGlossy},
+                 {"see-through", sim::MaterialOverride::kSeeThrough}});
+    t.AddText(
+        {.name = "mask-shots",
+         .help = "backlit: a second photo per stop with the backlight on, which the silhouettes "
+                 "are taken from",
+         .choices = {"none", "backlit"}},
+        [](const O& o) { return o.mask_shots; },
+        [](O& o, const std::string& text) {
+          CheckOptionChoice({.name = "mask-shots", .choices = {"none", "backlit"}}, text);
+          o.mask_shots = text;
+        });
     t.Add({.name = "plate-radius",
            .help = "turntable plate radius",
            .unit = "m",
@@ -289,6 +318,18 @@ SimCaptureResult SimulateCapture(const SimCaptureOptions& options,
       view.camera_model = camera;
       WriteImage(staging / view.image, rendered.image,
                  {.jpeg_quality = options.jpeg_quality, .overwrite = false});
+      if (options.mask_shots == "backlit") {
+        // The same stop with the backlight on (another shot: its own noise).
+        sim::RenderOptions backlit = render;
+        backlit.backlit = true;
+        backlit.seed = render.seed ^ 0x6a09e667f3bcc909ULL;
+        watch.Restart();
+        const cv::Mat shot = sim::Render(scene, camera, angle, backlit).image;
+        result.render_seconds += watch.ElapsedSeconds();
+        view.mask_shot = MaskShotPath(c, stop);
+        WriteImage(staging / view.mask_shot, shot,
+                   {.jpeg_quality = options.jpeg_quality, .overwrite = false});
+      }
       const std::string mask = "ground_truth/masks/" + stem + ".png";
       const std::string depth = "ground_truth/depth/" + stem + ".png";
       WriteImage(staging / mask, rendered.mask, {.overwrite = false});

@@ -98,8 +98,9 @@ std::vector<std::string> RunArgs(const std::filesystem::path& out, bool small = 
       "run",   "--sim",      "--product", "kill-test",
       "--out", out.string(), "--data",    testing::SharedDataDir().string()};
   const std::vector<std::string> size =
-      small ? std::vector<std::string>{"--size", "360x240", "--views", "6"}
-            : std::vector<std::string>{"--size", "480x320", "--views", "8", "--exclude-views", "2"};
+      small
+          ? std::vector<std::string>{"--size", "360x240", "--views", "6", "--mask-shots", "backlit"}
+          : std::vector<std::string>{"--size", "480x320", "--views", "8", "--exclude-views", "2"};
   args.insert(args.end(), size.begin(), size.end());
   args.insert(args.end(), kSmallPublish.begin(), kSmallPublish.end());
   return args;
@@ -108,7 +109,10 @@ std::vector<std::string> RunArgs(const std::filesystem::path& out, bool small = 
 std::map<std::string, std::string> Recorded(const std::filesystem::path& session) {
   std::map<std::string, std::string> photos;
   if (!std::filesystem::exists(session / kManifestName)) return photos;
-  for (const SessionView& v : ReadSession(session).views) photos[v.image] = v.sha256;
+  for (const SessionView& v : ReadSession(session).views) {
+    photos[v.image] = v.sha256;
+    if (!v.mask_shot.empty()) photos[v.mask_shot] = v.mask_shot_sha256;
+  }
   return photos;
 }
 
@@ -119,7 +123,7 @@ TEST(RunSessionTest, ResumesAfterSigkillAtTenMomentsWithTheSamePhotosAndNoDuplic
   ASSERT_EQ(Wait(Spawn(RunArgs(dir / "reference", true))), 0);
   const double seconds = watch.ElapsedSeconds();
   const std::filesystem::path reference = dir / "reference" / "kill-test";
-  ASSERT_EQ(Recorded(reference).size(), 6u);
+  ASSERT_EQ(Recorded(reference).size(), 12u);  // 6 photos, each with its backlit mask shot
 
   std::mt19937 random(20261201);
   std::uniform_real_distribution<double> jitter(0.0, 1.0);
@@ -154,7 +158,7 @@ TEST(RunSessionTest, ResumesAfterSigkillAtTenMomentsWithTheSamePhotosAndNoDuplic
         [] { return true; },
         [&] { return count_files(session / "images") >= 1; },
         [&] { return count_files(session / "images") >= 3; },
-        [&] { return count_files(session / "images") >= 5; },
+        [&] { return count_files(session / "images") >= 8; },
         [&] { return count_files(session / "masks") >= 1; },
         [&] { return count_files(session / "masks") >= 4; },
         [&] { return std::filesystem::exists(session / "recon" / "hull.ply"); },
@@ -188,23 +192,27 @@ TEST(RunSessionTest, ResumesAfterSigkillAtTenMomentsWithTheSamePhotosAndNoDuplic
     EXPECT_EQ(done.stages.at("capture"), "done");
     EXPECT_EQ(done.stages.at("reconstruct"), "done");
     EXPECT_EQ(done.stages.at("texture"), "done");
-    // Every planned photo once; none recorded before the kill was retaken.
+    // Every planned photo and mask shot once; none recorded before the kill was retaken.
     std::set<std::string> names;
     for (const SessionView& v : done.views) {
-      EXPECT_TRUE(names.insert(v.image).second) << "duplicate " << v.image;
-      EXPECT_EQ(FileSha256(session / v.image), v.sha256) << v.image;
-      const auto it = before.find(v.image);
-      if (it != before.end()) {
-        EXPECT_EQ(it->second, v.sha256) << "kill " << k << ": " << v.image << " retaken";
+      for (const auto& [file, sha] :
+           {std::pair{v.image, v.sha256}, std::pair{v.mask_shot, v.mask_shot_sha256}}) {
+        ASSERT_FALSE(file.empty()) << "kill " << k << ": " << v.image << " without its mask shot";
+        EXPECT_TRUE(names.insert(file).second) << "duplicate " << file;
+        EXPECT_EQ(FileSha256(session / file), sha) << file;
+        const auto it = before.find(file);
+        if (it != before.end()) {
+          EXPECT_EQ(it->second, sha) << "kill " << k << ": " << file << " retaken";
+        }
       }
     }
-    EXPECT_EQ(names.size(), 6u);
+    EXPECT_EQ(names.size(), 12u);
     int files = 0;
     for (const auto& entry : std::filesystem::directory_iterator(session / "images")) {
       ++files;
       EXPECT_TRUE(names.count("images/" + entry.path().filename().string())) << entry.path();
     }
-    EXPECT_EQ(files, 6) << "kill " << k;
+    EXPECT_EQ(files, 12) << "kill " << k;
     for (const char* name :
          {"model/model.obj", "model/model.png", "model/model.glb", "recon/mesh.ply"})
       EXPECT_TRUE(std::filesystem::exists(session / name)) << "kill " << k << ": " << name;
@@ -350,6 +358,70 @@ TEST(RunSessionTest, ResumeRetakesMissingAndDamagedPhotosAndKeepsTheDamagedCopy)
   EXPECT_FALSE(again.textured);
   // An existing session is never replaced without --force.
   EXPECT_EQ(Wait(Spawn(RunArgs(dir.path()))), kExitIoError);
+}
+
+// Backlit mask shots: one beside every photo, with its own checksum; the silhouettes come from
+// them. A resume retakes exactly what is missing or damaged: a mask shot alone when only it is,
+// both shots of a view whose photo is lost; everything else stays byte for byte.
+TEST(RunSessionTest, MaskShotsAreVerifiedAndRetakenWithTheirStop) {
+  TempDir dir;
+  RunOptions options;
+  options.product = "backlit";
+  options.out = dir.path();
+  options.sim.scene = "bottle";
+  options.sim.data_dir = testing::SharedDataDir();
+  options.sim.rig.width = 480;
+  options.sim.rig.height = 320;
+  options.sim.stops = 6;
+  options.sim.mask_shots = "backlit";
+  options.sim.material = sim::MaterialOverride::kWhite;  // white on the light backdrop
+  options.sim.render.exposure = 0.65;
+  options.publish_model = false;
+  Progress progress;
+  const RunResult first = RunSession(options, progress);
+  EXPECT_EQ(first.photos_taken, 12);
+  const std::filesystem::path session = first.session;
+  const Session captured = ReadSession(session);
+  ASSERT_EQ(captured.views.size(), 6u);
+  for (const SessionView& v : captured.views) {
+    EXPECT_EQ(v.mask_shot, "images/" + ViewStem(v.camera, v.stop) + "_backlit.jpg");
+    EXPECT_EQ(FileSha256(session / v.mask_shot), v.mask_shot_sha256);
+    EXPECT_NE(v.mask_shot_sha256, v.sha256);
+  }
+  // The silhouettes came from the mask shots.
+  {
+    ReconstructOptions reconstruct;
+    const ReconstructResult again = ReconstructSession(session, reconstruct, progress);
+    EXPECT_EQ(again.method, "backlit");
+    for (const auto& view : again.agreement) EXPECT_GE(view.iou, 0.95) << view.view;
+  }
+  const auto before = Recorded(session);
+  std::filesystem::remove(session / "images/cam0_stop02_backlit.jpg");
+  testing::WriteBytes(session / "images/cam0_stop04_backlit.jpg", "not a photo");
+  std::filesystem::remove(session / "images/cam0_stop01.jpg");
+  const RunResult resumed = ResumeSession(session, progress);
+  // Two mask shots alone; the lost photo and its mask shot together.
+  EXPECT_EQ(resumed.photos_taken, 4);
+  EXPECT_EQ(resumed.photos_retaken, 4);
+  EXPECT_EQ(resumed.photos_kept, 8);
+  EXPECT_TRUE(resumed.reconstructed);
+  EXPECT_TRUE(std::filesystem::exists(session / "damaged/cam0_stop04_backlit.jpg.1"));
+  EXPECT_TRUE(std::filesystem::exists(session / "damaged/cam0_stop01_backlit.jpg.1"));
+  const auto after = Recorded(session);
+  ASSERT_EQ(after.size(), 12u);
+  const std::set<std::string> retaken = {"images/cam0_stop02_backlit.jpg",
+                                         "images/cam0_stop04_backlit.jpg", "images/cam0_stop01.jpg",
+                                         "images/cam0_stop01_backlit.jpg"};
+  for (const auto& [file, sha] : after) {
+    EXPECT_EQ(FileSha256(session / file), sha) << file;
+    if (retaken.count(file) == 0) {
+      EXPECT_EQ(before.at(file), sha) << file;
+    }
+  }
+  const RunResult nothing = ResumeSession(session, progress);
+  EXPECT_EQ(nothing.photos_taken, 0);
+  EXPECT_EQ(nothing.photos_kept, 12);
+  EXPECT_FALSE(nothing.reconstructed);
 }
 
 // run.json holds what a resume needs from anywhere: the data folder as an absolute path (it was

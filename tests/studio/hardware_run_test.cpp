@@ -6,6 +6,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include <atomic>
 #include <cmath>
@@ -19,12 +21,14 @@
 #include "carousel/calib/rig_calibration.h"
 #include "carousel/core/error.h"
 #include "carousel/core/file_util.h"
+#include "carousel/core/image_io.h"
 #include "carousel/core/progress.h"
 #include "carousel/sim/avr_turntable.h"
 #include "carousel/sim/ptpip_camera.h"
 #include "carousel/sim/scene.h"
 #include "carousel/sim/sim_rig.h"
 #include "carousel/studio/defaults.h"
+#include "carousel/studio/reconstruct.h"
 #include "carousel/studio/rig_config.h"
 #include "carousel/studio/run_session.h"
 #include "carousel/studio/session.h"
@@ -71,6 +75,8 @@ class HardwareRunTest : public ::testing::Test {
                                  static_cast<double>(position - *home_position_) / kStepsPerRev;
             table_->StartMoveTo(angle);
             table_->WaitUntilStopped(1s);
+            // The studio's backlight, as the controller's light output has it now.
+            table_->SetBacklight(controller_->backlight_on());
             for (const auto& [name, value] : settings) camera->SetSetting(name, value, 0ms);
             return camera->Shoot();
           },
@@ -142,6 +148,61 @@ TEST_F(HardwareRunTest, SixteenStopsThroughTheFirmwareAndLibgphoto2IntoASession)
   ASSERT_EQ(result.texture.held_out.size(), 1u);
   std::cout << "held-out view 3: PSNR " << result.texture.held_out[0].psnr_db << " dB\n";
   EXPECT_GT(result.texture.held_out[0].psnr_db, 17.0);
+}
+
+// Backlit mask shots on hardware: at every stop the controller's light output goes on (LIGHT,
+// protocol 1.1), both cameras fire again through libgphoto2, and it goes off; the emulators
+// photograph the studio as that output lights it. The silhouettes come from those shots.
+TEST_F(HardwareRunTest, BacklitMaskShotsThroughTheControllersLightOutput) {
+  RigConfig config = Config();
+  config.capture.stops = 8;
+  config.capture.mask_shots = "backlit";
+  config.capture.backlight_settle_ms = 20;
+  WriteRigConfig(dir_ / "rig.json", config);
+  RunOptions options;
+  options.hardware = ReadRigConfig(dir_ / "rig.json");
+  EXPECT_EQ(options.hardware->capture.mask_shots, "backlit");
+  options.product = "hw-backlit";
+  options.out = dir_.path() / "sessions";
+  options.publish_model = false;
+  Progress progress;
+  const RunResult result = RunSession(options, progress);
+  EXPECT_EQ(result.photos_taken, 32);
+  const Session session = ReadSession(result.session);
+  ASSERT_EQ(session.views.size(), 16u);
+  for (std::size_t c = 0; c < emulators_.size(); ++c) {
+    const std::vector<sim::PtpIpPhoto> served = emulators_[c]->Photos();
+    ASSERT_EQ(served.size(), 16u) << c;
+    for (int stop = 0; stop < 8; ++stop) {
+      const std::string stem = ViewStem(static_cast<int>(c), stop);
+      const auto photo = result.session / "images" / (stem + ".jpg");
+      const auto shot = result.session / "images" / (stem + "_backlit.jpg");
+      EXPECT_EQ(ReadFileBytes(photo), served[2 * stop].bytes) << photo;
+      EXPECT_EQ(ReadFileBytes(shot), served[2 * stop + 1].bytes) << shot;
+      // The mask shot shows the product dark against the lit panel: where it is dark, the
+      // front-lit photo is much lighter.
+      const cv::Mat lit = ReadImage(photo), backlit = ReadImage(shot);
+      cv::Mat grey;
+      cv::cvtColor(backlit, grey, cv::COLOR_BGR2GRAY);
+      const cv::Mat dark = grey < 100;
+      EXPECT_GT(cv::countNonZero(dark), 500) << shot;
+      EXPECT_GT(cv::mean(lit, dark)[1], cv::mean(backlit, dark)[1] + 30.0) << shot;
+      EXPECT_GT(cv::mean(grey, ~dark)[0], 200.0) << shot;  // the panel and the plate glow
+    }
+  }
+  for (const SessionView& v : session.views)
+    EXPECT_EQ(v.mask_shot_sha256, FileSha256(result.session / v.mask_shot));
+  // One on-time of the light per stop, each over by the next stop's move, none left on.
+  int on_times = 0;
+  for (const sim::OutputPulse& p : controller_->output_pulses()) {
+    if (p.output != sim::kBacklightOutput) continue;
+    ++on_times;
+    EXPECT_NE(p.end_cycle, 0u);
+  }
+  EXPECT_EQ(on_times, 8);
+  EXPECT_FALSE(controller_->backlight_on());
+  ReconstructOptions reconstruct;
+  EXPECT_EQ(ReconstructSession(result.session, reconstruct, progress).method, "backlit");
 }
 
 TEST_F(HardwareRunTest, ControllerShutterOutputsReleaseTheCameras) {

@@ -7,8 +7,11 @@
 //     but not recorded (a kill between download and manifest) is adopted; a damaged one is
 //     moved aside (damaged/<name>.N, never deleted) and retaken.
 // Each stop: move, settle, every camera fires at once (triggered through libgphoto2 or
-// released by the controller's shutter outputs), then the table turns to the next stop while
-// the photos download.
+// released by the controller's shutter outputs); with mask shots (plan "backlit") the backlight
+// goes on, every camera fires again into cam<C>_stop<SS>_backlit.jpg and the backlight goes off;
+// then the table turns to the next stop while the photos download. Resume, adoption and
+// checksums cover both photos of a stop: a view whose mask shot is missing or damaged gets
+// only that shot again.
 #pragma once
 
 #include <filesystem>
@@ -35,6 +38,9 @@ struct CaptureResult {
 // photo recorded before is kept.
 CaptureResult CaptureSession(const std::filesystem::path& folder, Session& session,
                              RigBackends& rig, int placements, Progress& progress);
+
+// The relative path of the backlit mask shot camera `camera` takes at stop `stop`.
+std::string MaskShotPath(int camera, int stop);
 
 // Removes the temporary files atomic writes leave behind when a process is killed.
 void RemoveStaleTemporaries(const std::filesystem::path& folder);

@@ -32,6 +32,9 @@ struct ReconstructOptions {
 
 struct ReconstructResult {
   int views = 0;
+  std::string method;              // the silhouette method used ("backlit", "key", ...)
+  int given_masks = 0;             // views whose mask was given (a dataset's, or edited by hand)
+  int redecided = 0;               // views the multi-view step segmented again or repaired
   double min_mask_fraction = 0.0;  // smallest object fraction of a photo
   std::size_t hull_faces = 0;
   double voxel_size_m = 0.0;
@@ -44,6 +47,17 @@ struct ReconstructResult {
   double seconds_agreement = 0.0;
 };
 
+// Masks edited by hand since the reconstruction wrote them (their file differs from the
+// recorded checksum): each is copied to masks/given/ (the edit is never lost) and recorded as the
+// view's given mask, which the next reconstruction starts from and checks against the other
+// views (a deliberate fix that agrees with them stays; a damaged mask is repaired). Returns the
+// edited masks' paths; `session` and its manifest are updated. \throw IoError.
+std::vector<std::string> AdoptEditedMasks(const std::filesystem::path& session_folder,
+                                          Session& session);
+
+// Silhouettes come from the given masks (session views' given_mask), else from the backlit mask
+// shots when every view has one (method auto), else from the photos; masks/ receives the
+// consistent result and session.json each mask's checksum.
 // \throw IoError/FormatError naming the session file at fault, InvalidArgument, Cancelled.
 ReconstructResult ReconstructSession(const std::filesystem::path& session_folder,
                                      const ReconstructOptions& options, Progress& progress);

@@ -16,6 +16,7 @@
 //                                   not needed with a calibration_file }}],
 //     "capture": {"stops": 16, "settle_ms": 300, "delete_from_camera": true,
 //                 "shutter": "camera" | "controller", "shutter_pulse_ms": 100,
+//                 "mask_shots": "none" | "backlit", "backlight_settle_ms": 50,
 //                 "move_timeout_s": 60, "camera_timeout_s": 60},
 //     "backdrop": "key" | "difference",   (how silhouettes are found; default key)
 //     "backgrounds": "plates/"             (difference: cam<C>.jpg, the empty turntable
@@ -55,6 +56,12 @@ struct CapturePlan {
   // turntable controller's shutter outputs, camera i wired to output i: all fire together).
   std::string shutter = "camera";
   int shutter_pulse_ms = 100;  // controller: how long the release is held
+  // Mask shots: "none", or "backlit": at every stop a second photo per camera with the
+  // backlight on (the turntable controller's light output), which the silhouettes are taken
+  // from (the product dark against the lit panel, whatever its colours); the texture still
+  // comes from the first.
+  std::string mask_shots = "none";
+  int backlight_settle_ms = 50;  // wait after switching the backlight before firing
   double move_timeout_s = 60.0;
   double camera_timeout_s = 60.0;
   void Validate() const;

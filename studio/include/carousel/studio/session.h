@@ -33,8 +33,19 @@ inline constexpr int kSessionFormatVersion = 1;
 inline constexpr const char* kManifestName = "session.json";
 
 struct SessionView {
-  std::string image;             // relative path of the photo
-  std::string mask;              // relative path of its silhouette, empty until made
+  std::string image;        // relative path of the photo
+  std::string mask;         // relative path of its silhouette, empty until made
+  std::string mask_sha256;  // of the silhouette as the reconstruct stage wrote it
+  // The backlit mask shot of the same camera and stop (the backlight on; capture plan
+  // "mask_shots": "backlit"): what the silhouette is taken from, while the texture comes from
+  // `image`. Empty when the plan took none.
+  std::string mask_shot;
+  std::string mask_shot_sha256;  // of the mask shot as downloaded
+  // A silhouette given rather than found (a dataset's own masks, `carousel import --masks`, or
+  // a mask edited by hand after reconstruct, kept under masks/given/): the reconstruct stage
+  // starts from it instead of segmenting the photo, and checks it against the other views.
+  std::string given_mask;
+  std::string given_mask_sha256;
   int camera = 0;                // index of the camera in the rig
   int stop = 0;                  // index of the turntable stop
   double table_angle_deg = 0.0;  // table angle at capture
@@ -81,8 +92,14 @@ void WriteSessionManifest(const std::filesystem::path& folder, const Session& se
 // The session's photos as Views (absolute paths, cameras, angles, masks when present).
 std::vector<View> SessionViews(const std::filesystem::path& folder, const Session& session);
 
-// The file stem of the photo camera `camera` takes at turntable stop `stop`: "cam0_stop03".
+// The file stem of the photo camera `camera` takes at turntable stop `stop`: "cam0_stop03";
+// its backlit mask shot's is ViewStem + kMaskShotSuffix ("cam0_stop03_backlit").
 std::string ViewStem(int camera, int stop);
+inline constexpr const char* kMaskShotSuffix = "_backlit";
+
+// The session's backlit mask shots as Views (the photos' cameras), one per view; empty unless
+// every view has one.
+std::vector<View> SessionMaskShotViews(const std::filesystem::path& folder, const Session& session);
 
 // The current UTC time as ISO 8601 ("2026-11-22T01:44:27Z").
 std::string NowUtc();

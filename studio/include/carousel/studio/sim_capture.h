@@ -46,8 +46,12 @@ struct SimCaptureOptions {
     return options;
   }();
   int jpeg_quality = 95;  // 1..100
-  // Every material of the model made white, black or glossy (sim::Scene::OverrideMaterials).
+  // Every material of the model made white, black, glossy or see-through
+  // (sim::Scene::OverrideMaterials).
   sim::MaterialOverride material = sim::MaterialOverride::kNone;
+  // "none", or "backlit": beside every photo a backlit mask shot (the backlight on), which the
+  // silhouettes are taken from (CapturePlan::mask_shots).
+  std::string mask_shots = "none";
   // The product name recorded in the manifest; empty = the scene's name.
   std::string product;
   // Replace an existing session folder (after the new one is complete).
