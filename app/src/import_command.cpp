@@ -33,9 +33,13 @@ void AddImportCommand(CLI::App& command, Dispatch& dispatch) {
       ->capture_default_str();
   command.add_option("--product", args->options.product, "product name");
   command.add_flag("--force", args->options.overwrite, "replace an existing session folder");
+  command.add_option("--masks", args->options.masks_dir,
+                     "folder of the dataset's own silhouettes, one per photo (<stem>.png, ...): "
+                     "the reconstruction starts from them and checks them against the other "
+                     "views");
   command.add_flag("--keep-frame", args->options.keep_frame,
-                   "keep the dataset's world frame (default: stand it upright, +Z up, the origin "
-                   "where the cameras look)");
+                   "keep the dataset's world frame (default: stand it upright, +Z up along the "
+                   "camera ring's axis, the origin on it where the cameras look)");
   dispatch.On(&command, [args](Io& io) {
     using Options = studio::ImportOptions;
     args->options.format =

@@ -1259,6 +1259,82 @@ cv::Mat SegmentBacklitAtWorkingSize(const cv::Mat& image, const SilhouetteOption
   return fg;
 }
 
+// The views whose silhouette disagrees with the hull of the other views (`priors`, from
+// OthersHullPriors; enclosed backdrop left at 255 there, open backdrop lowered to 192): object
+// where no other view allows it (a spill), or backdrop where every other view says object (a
+// hole). With `holes_only`, the views with holes alone. A view that disagrees over more than
+// kMaxRepairFraction of its silhouette is left for the hull to name.
+std::vector<std::size_t> DisagreeingViews(const std::vector<View>& views, SilhouettesResult* result,
+                                          int threads, bool holes_only,
+                                          std::vector<cv::Mat>* priors) {
+  // The views that disagree with the others' hull: object where no other view allows it, or
+  // backdrop where every other view says object. Decided at the priors' size (the grid is
+  // coarse), in parallel.
+  std::vector<std::uint8_t> disagrees(views.size(), 0);
+  ParallelFor(views.size(), 1, threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t v = begin; v < end; ++v) {
+      cv::Mat object = result->masks[v];
+      if (object.size() != (*priors)[v].size())
+        cv::resize(object, object, (*priors)[v].size(), 0, 0, cv::INTER_AREA);
+      object = object >= 128;
+      // Deep inside the others' hull, only holes enclosed by the object are filled regardless
+      // of colour; backdrop open to the outside (under a sole's arch) is a concavity the
+      // others' hull may not have carved.
+      cv::Mat open_backdrop = ~object;
+      cv::Mat labels;
+      const int n = cv::connectedComponents(open_backdrop, labels, 4, CV_32S);
+      std::vector<std::uint8_t> touches(static_cast<std::size_t>(n), 0);
+      for (int x = 0; x < labels.cols; ++x) {
+        touches[static_cast<std::size_t>(labels.at<int>(0, x))] = 1;
+        touches[static_cast<std::size_t>(labels.at<int>(labels.rows - 1, x))] = 1;
+      }
+      for (int y = 0; y < labels.rows; ++y) {
+        touches[static_cast<std::size_t>(labels.at<int>(y, 0))] = 1;
+        touches[static_cast<std::size_t>(labels.at<int>(y, labels.cols - 1))] = 1;
+      }
+      touches[0] = 0;  // the object
+      for (int y = 0; y < labels.rows; ++y) {
+        const int* l = labels.ptr<int>(y);
+        std::uint8_t* o = open_backdrop.ptr<std::uint8_t>(y);
+        for (int x = 0; x < labels.cols; ++x)
+          o[x] = touches[static_cast<std::size_t>(l[x])] ? 255 : 0;
+      }
+      (*priors)[v].setTo(192, ((*priors)[v] == 255) & open_backdrop);
+      // Slivers along the outline do not count: the grid is coarse.
+      const cv::Mat sliver = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3));
+      // Holes well inside the others' hull count whatever their shape (a highlight along a
+      // glossy lace keyed as backdrop leaves a hair-thin hole).
+      cv::Mat spill_map, hole_map;
+      cv::erode(object & ((*priors)[v] == 0), spill_map, sliver);
+      cv::erode(~object & ~open_backdrop & ((*priors)[v] >= 192), hole_map, sliver);
+      hole_map |= ~object & ~open_backdrop & ((*priors)[v] == 255);
+      const int spill = cv::countNonZero(spill_map);
+      const int hole = cv::countNonZero(hole_map);
+      result->stats[v].outside_others = spill;
+      result->stats[v].hole_in_others = hole;
+      const double area = cv::countNonZero(object);
+      // A hole carves a tunnel through the hull whatever its size; a spill is only carved. A
+      // view that disagrees about much of its object is not a segmentation slip but a wrong
+      // pose or photo: made to agree, it would hide that; the hull names it instead.
+      const bool slip =
+          hole > kMinDisagreementPx ||
+          (!holes_only && spill > std::max(kMinDisagreementPx, kMinDisagreementFraction * area));
+      if (slip && hole + spill > kMaxRepairFraction * area) {
+        CAROUSEL_LOG_WARN(views[v].name()
+                          << ": the silhouette disagrees with the other views' hull over "
+                          << cvRound(100.0 * (hole + spill) / std::max(1.0, area))
+                          << "% of its area: not repaired (a wrong camera pose or photo?)");
+        continue;
+      }
+      disagrees[v] = slip;
+    }
+  });
+  std::vector<std::size_t> disagreeing;
+  for (std::size_t v = 0; v < views.size(); ++v)
+    if (disagrees[v]) disagreeing.push_back(v);
+  return disagreeing;
+}
+
 }  // namespace
 
 cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
@@ -1388,112 +1464,63 @@ void MakeConsistent(const std::vector<View>& views, const std::vector<cv::Mat>& 
   options.method = ResolveSilhouetteMethod(requested.method, views.size(), mask_shots.size());
   VisualHullOptions hull_options = hull;
   hull_options.threads = options.threads;
-  std::vector<cv::Mat> priors = OthersHullPriors(views, result->masks, hull_options);
-  if (priors.empty()) return;  // an empty silhouette: the hull names it
-  // The views that disagree with the others' hull: object where no other view allows it, or
-  // backdrop where every other view says object. Decided at the priors' size (the grid is
-  // coarse), in parallel.
-  std::vector<std::uint8_t> disagrees(views.size(), 0);
-  ParallelFor(views.size(), 1, options.threads, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t v = begin; v < end; ++v) {
-      cv::Mat object = result->masks[v];
-      if (object.size() != priors[v].size())
-        cv::resize(object, object, priors[v].size(), 0, 0, cv::INTER_AREA);
-      object = object >= 128;
-      // Deep inside the others' hull, only holes enclosed by the object are filled regardless
-      // of colour; backdrop open to the outside (under a sole's arch) is a concavity the
-      // others' hull may not have carved.
-      cv::Mat open_backdrop = ~object;
-      cv::Mat labels;
-      const int n = cv::connectedComponents(open_backdrop, labels, 4, CV_32S);
-      std::vector<std::uint8_t> touches(static_cast<std::size_t>(n), 0);
-      for (int x = 0; x < labels.cols; ++x) {
-        touches[static_cast<std::size_t>(labels.at<int>(0, x))] = 1;
-        touches[static_cast<std::size_t>(labels.at<int>(labels.rows - 1, x))] = 1;
-      }
-      for (int y = 0; y < labels.rows; ++y) {
-        touches[static_cast<std::size_t>(labels.at<int>(y, 0))] = 1;
-        touches[static_cast<std::size_t>(labels.at<int>(y, labels.cols - 1))] = 1;
-      }
-      touches[0] = 0;  // the object
-      for (int y = 0; y < labels.rows; ++y) {
-        const int* l = labels.ptr<int>(y);
-        std::uint8_t* o = open_backdrop.ptr<std::uint8_t>(y);
-        for (int x = 0; x < labels.cols; ++x)
-          o[x] = touches[static_cast<std::size_t>(l[x])] ? 255 : 0;
-      }
-      priors[v].setTo(192, (priors[v] == 255) & open_backdrop);
-      // Slivers along the outline do not count: the grid is coarse.
-      const cv::Mat sliver = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3));
-      // Holes well inside the others' hull count whatever their shape (a highlight along a
-      // glossy lace keyed as backdrop leaves a hair-thin hole).
-      cv::Mat spill_map, hole_map;
-      cv::erode(object & (priors[v] == 0), spill_map, sliver);
-      cv::erode(~object & ~open_backdrop & (priors[v] >= 192), hole_map, sliver);
-      hole_map |= ~object & ~open_backdrop & (priors[v] == 255);
-      const int spill = cv::countNonZero(spill_map);
-      const int hole = cv::countNonZero(hole_map);
-      result->stats[v].outside_others = spill;
-      result->stats[v].hole_in_others = hole;
-      const double area = cv::countNonZero(object);
-      // A hole carves a tunnel through the hull whatever its size; a spill is only carved. A
-      // view that disagrees about much of its object is not a segmentation slip but a wrong
-      // pose or photo: made to agree, it would hide that; the hull names it instead.
-      const bool slip = hole > kMinDisagreementPx ||
-                        spill > std::max(kMinDisagreementPx, kMinDisagreementFraction * area);
-      if (slip && hole + spill > kMaxRepairFraction * area) {
-        CAROUSEL_LOG_WARN(views[v].name()
-                          << ": the silhouette disagrees with the other views' hull over "
-                          << cvRound(100.0 * (hole + spill) / std::max(1.0, area))
-                          << "% of its area: not repaired (a wrong camera pose or photo?)");
-        continue;
-      }
-      disagrees[v] = slip;
+  // Two passes: first the views with holes (a false hole carves a tunnel through every other
+  // view's prior, which would then "repair" their silhouettes to agree with it), then, against
+  // priors made from the repaired masks, every view that still disagrees.
+  std::vector<cv::Mat> priors;
+  bool stale = true;
+  for (int pass = 0; pass < 2; ++pass) {
+    const bool holes_only = pass == 0;
+    if (stale) {
+      priors = OthersHullPriors(views, result->masks, hull_options);
+      if (priors.empty()) return;  // an empty silhouette: the hull names it
+      stale = false;
     }
-  });
-  std::vector<std::size_t> disagreeing;
-  for (std::size_t v = 0; v < views.size(); ++v)
-    if (disagrees[v]) disagreeing.push_back(v);
-  if (disagreeing.empty()) return;
-  progress.BeginStage("silhouettes: multi-view consistency");
-  std::atomic<std::size_t> done{0};
-  ParallelFor(disagreeing.size(), 1, options.threads, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t k = begin; k < end; ++k) {
-      progress.CheckCancelled();
-      const std::size_t v = disagreeing[k];
-      const View& view = views[v];
-      const cv::Mat background =
-          options.method == SilhouetteMethod::kDifference ? backgrounds[v] : cv::Mat();
-      SilhouetteStats stats = result->stats[v];
-      const cv::Mat before = result->masks[v] >= 128;
-      if (stats.given) {
-        // A given mask: repaired geometrically, at its own size (nothing to segment again).
-        cv::Mat prior;
-        cv::resize(priors[v], prior, before.size(), 0, 0, cv::INTER_NEAREST);
-        ApplyPrior(prior, &result->masks[v]);
-      } else {
-        const bool backlit = options.method == SilhouetteMethod::kBacklit;
-        const View& source = backlit ? mask_shots[v] : view;
-        result->masks[v] =
-            ComputeSilhouette(source.Image(), view.camera(), options, background, source.name(),
-                              &stats, priors[v], backlit ? view.Image() : cv::Mat());
-        source.ReleasePixels();
-        view.ReleasePixels();
+    const std::vector<std::size_t> disagreeing =
+        DisagreeingViews(views, result, options.threads, holes_only, &priors);
+    if (disagreeing.empty()) continue;
+    stale = true;
+    progress.BeginStage("silhouettes: multi-view consistency");
+    std::atomic<std::size_t> done{0};
+    ParallelFor(disagreeing.size(), 1, options.threads, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t k = begin; k < end; ++k) {
+        progress.CheckCancelled();
+        const std::size_t v = disagreeing[k];
+        const View& view = views[v];
+        const cv::Mat background =
+            options.method == SilhouetteMethod::kDifference ? backgrounds[v] : cv::Mat();
+        SilhouetteStats stats = result->stats[v];
+        const cv::Mat before = result->masks[v] >= 128;
+        if (stats.given) {
+          // A given mask: repaired geometrically, at its own size (nothing to segment again).
+          cv::Mat prior;
+          cv::resize(priors[v], prior, before.size(), 0, 0, cv::INTER_NEAREST);
+          ApplyPrior(prior, &result->masks[v]);
+        } else {
+          const bool backlit = options.method == SilhouetteMethod::kBacklit;
+          const View& source = backlit ? mask_shots[v] : view;
+          result->masks[v] =
+              ComputeSilhouette(source.Image(), view.camera(), options, background, source.name(),
+                                &stats, priors[v], backlit ? view.Image() : cv::Mat());
+          source.ReleasePixels();
+          view.ReleasePixels();
+        }
+        const cv::Mat after = result->masks[v] >= 128;
+        stats.outside_others = result->stats[v].outside_others;
+        stats.hole_in_others = result->stats[v].hole_in_others;
+        stats.redecided = true;
+        stats.pixels_removed = result->stats[v].pixels_removed + cv::countNonZero(before & ~after);
+        stats.pixels_added = result->stats[v].pixels_added + cv::countNonZero(~before & after);
+        result->stats[v] = stats;
+        CAROUSEL_LOG_INFO(view.name()
+                          << ": silhouette re-decided against the other views' hull ("
+                          << cv::countNonZero(before & ~after) << " pixels outside it removed, "
+                          << cv::countNonZero(~before & after) << " added)");
+        progress.Report(++done, disagreeing.size());
       }
-      const cv::Mat after = result->masks[v] >= 128;
-      stats.outside_others = result->stats[v].outside_others;
-      stats.hole_in_others = result->stats[v].hole_in_others;
-      stats.redecided = true;
-      stats.pixels_removed = cv::countNonZero(before & ~after);
-      stats.pixels_added = cv::countNonZero(~before & after);
-      result->stats[v] = stats;
-      CAROUSEL_LOG_INFO(view.name() << ": silhouette re-decided against the other views' hull ("
-                                    << stats.pixels_removed << " pixels outside it removed, "
-                                    << stats.pixels_added << " added)");
-      progress.Report(++done, disagreeing.size());
-    }
-  });
-  progress.EndStage();
+    });
+    progress.EndStage();
+  }
 }
 
 double MaskIoU(const cv::Mat& a, const cv::Mat& b) {

@@ -7,13 +7,16 @@
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
+#include <Eigen/QR>
 #include <Eigen/SVD>
+#include <opencv2/core.hpp>
 
 #include "carousel/core/error.h"
 #include "carousel/core/file_util.h"
 #include "carousel/core/image_io.h"
 #include "carousel/core/logging.h"
 #include "carousel/core/text.h"
+#include "carousel/studio/checksum.h"
 #include "carousel/studio/session.h"
 
 namespace carousel::studio {
@@ -210,6 +213,35 @@ std::vector<DatasetView> ReadColmap(const std::filesystem::path& model,
   return views;
 }
 
+// The dataset's silhouette of photo `name` (masks_dir/<stem>.<ext> or <name>.png), 8-bit with
+// the object at 255 (0/1 masks scaled). \throw IoError naming the mask looked for, FormatError
+// for a mask of the wrong size.
+cv::Mat ReadDatasetMask(const std::filesystem::path& masks_dir, const std::string& name,
+                        const CameraModel& camera) {
+  const std::filesystem::path photo(name);
+  std::vector<std::filesystem::path> candidates;
+  for (const char* ext : {".png", ".pgm", ".pbm", ".bmp", ".tif", ".tiff", ".jpg"}) {
+    std::filesystem::path file = masks_dir / photo.parent_path() / photo.stem();
+    file += ext;
+    candidates.push_back(file);
+  }
+  candidates.push_back(masks_dir / (name + ".png"));
+  for (const std::filesystem::path& file : candidates) {
+    if (!std::filesystem::is_regular_file(file)) continue;
+    cv::Mat mask = ReadMask(file);
+    if (mask.cols != camera.width || mask.rows != camera.height)
+      throw FormatError(file, "mask is " + std::to_string(mask.cols) + "x" +
+                                  std::to_string(mask.rows) + ", its photo " + name + " is " +
+                                  std::to_string(camera.width) + "x" +
+                                  std::to_string(camera.height));
+    double highest = 0.0;
+    cv::minMaxLoc(mask, nullptr, &highest);
+    if (highest <= 1.0) mask *= 255;
+    return mask;
+  }
+  throw IoError(candidates.front(), "no mask for photo " + name + " in " + masks_dir.string());
+}
+
 void TransferPhoto(const std::filesystem::path& from, const std::filesystem::path& to,
                    ImportOptions::Transfer transfer) {
   std::error_code ec;
@@ -270,10 +302,41 @@ std::optional<UprightFrameResult> UprightFrame(const std::vector<CameraModel>& c
   Eigen::Vector3d mean_up = Eigen::Vector3d::Zero();
   for (const Eigen::Vector3d& u : ups) mean_up += u / n;
   UprightFrameResult result;
+  Eigen::Vector3d origin = target;
   if (lambda(0) < 0.5 * lambda(1)) {
     // A ring, rings about one axis, or a dome: the least spread direction is the axis.
     up = spread.eigenvectors().col(0).normalized();
     result.basis = "the axis of the camera ring";
+    // The ring's centre: a circle fitted to the centres in the ring's plane (algebraic,
+    // x^2 + y^2 + a x + b y + c = 0, least squares), then the axis through it.
+    const Eigen::Vector3d e1 = spread.eigenvectors().col(2).normalized();
+    const Eigen::Vector3d e2 = up.cross(e1).normalized();
+    Eigen::MatrixXd a(centres.size(), 3);
+    Eigen::VectorXd b(centres.size());
+    for (std::size_t i = 0; i < centres.size(); ++i) {
+      const double x = (centres[i] - mean).dot(e1), y = (centres[i] - mean).dot(e2);
+      a.row(static_cast<Eigen::Index>(i)) << x, y, 1.0;
+      b(static_cast<Eigen::Index>(i)) = -(x * x + y * y);
+    }
+    const Eigen::Vector3d circle = a.colPivHouseholderQr().solve(b);
+    const double cx = -0.5 * circle(0), cy = -0.5 * circle(1);
+    const double radius_sq = cx * cx + cy * cy - circle(2);
+    if (radius_sq > 0.0 && std::isfinite(radius_sq)) {
+      result.ring_radius = std::sqrt(radius_sq);
+      double sum_sq = 0.0;
+      for (const Eigen::Vector3d& c : centres) {
+        const double x = (c - mean).dot(e1) - cx, y = (c - mean).dot(e2) - cy;
+        const double off = std::hypot(x, y) - result.ring_radius;
+        sum_sq += off * off;
+      }
+      result.ring_rms = std::sqrt(sum_sq / n);
+      // A ring the centres really follow (not a dome's scatter): its axis holds the origin.
+      if (result.ring_rms < 0.1 * result.ring_radius) {
+        const Eigen::Vector3d centre = mean + cx * e1 + cy * e2;
+        origin = centre + up * up.dot(target - centre);
+        result.basis += " through the ring's centre";
+      }
+    }
   } else if (mean_up.norm() > 0.5) {
     up = mean_up.normalized();
     result.basis = "the photos' mean up direction";
@@ -291,7 +354,7 @@ std::optional<UprightFrameResult> UprightFrame(const std::vector<CameraModel>& c
                                           : ", pointing where the photos' up does";
   const Eigen::Matrix3d rotation =
       Eigen::Quaterniond::FromTwoVectors(up, Eigen::Vector3d::UnitZ()).toRotationMatrix();
-  result.world_from_dataset = Rigid3d(rotation, -(rotation * target));
+  result.world_from_dataset = Rigid3d(rotation, -(rotation * origin));
   return result;
 }
 
@@ -368,6 +431,15 @@ ImportResult ImportDataset(const ImportOptions& options,
     view.stop = static_cast<int>(i);
     view.camera_model = views[i].camera;
     TransferPhoto(images / views[i].name, folder.staging() / view.image, options.transfer);
+    if (!options.masks_dir.empty()) {
+      const std::filesystem::path stem = std::filesystem::path(views[i].name).stem();
+      view.given_mask = "masks/given/" + stem.string() + ".png";
+      folder.CreateFolder("masks/given");
+      WriteImage(folder.staging() / view.given_mask,
+                 ReadDatasetMask(options.masks_dir, views[i].name, view.camera_model),
+                 {.overwrite = false});
+      view.given_mask_sha256 = FileSha256(folder.staging() / view.given_mask);
+    }
     session.views.push_back(view);
     progress.Report(i + 1, views.size());
   }

@@ -166,6 +166,44 @@ TEST(ImportTest, UprightFrameFindsUpForRingsTwoRingsAndADomeInAnyFrame) {
   EXPECT_FALSE(UprightFrame(two).has_value());
 }
 
+// Three quarters of a ring about an axis, the cameras aimed at a point beside it (a product
+// off-centre on the turntable): the origin lies on the ring's axis, at the height they look
+// at, not at the point they aim at; the ring's radius is measured.
+TEST(ImportTest, UprightFrameCentresTheOriginOnTheRingsAxis) {
+  const Eigen::Vector3d axis_point(0.0, 0.0, 0.1);
+  const Eigen::Vector3d aim = axis_point + Eigen::Vector3d(0.06, 0.02, 0.0);
+  const double radius = 0.8, elevation = 10.0 * std::numbers::pi / 180.0;
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  const Rigid3d dataset_from_world(Eigen::Quaterniond::UnitRandom().toRotationMatrix(),
+                                   Eigen::Vector3d(unit(rng), unit(rng), unit(rng)));
+  std::vector<CameraModel> cameras;
+  for (int k = 0; k < 12; ++k) {
+    const double azimuth = 1.5 * std::numbers::pi * k / 11;
+    // On the ring about the axis, looking at the aim point.
+    const CameraModel on_ring = LookingAt(axis_point, azimuth, elevation, radius, 0.0);
+    const Eigen::Vector3d centre = on_ring.Centre();
+    const Eigen::Vector3d z = (aim - centre).normalized();
+    const Eigen::Vector3d x = z.cross(Eigen::Vector3d::UnitZ()).normalized();
+    Eigen::Matrix3d r;
+    r.row(0) = x.transpose();
+    r.row(1) = z.cross(x).transpose();
+    r.row(2) = z.transpose();
+    CameraModel camera = on_ring;
+    camera.cam_from_world = Rigid3d(r, -(r * centre)) * dataset_from_world.Inverse();
+    cameras.push_back(camera);
+  }
+  const auto upright = UprightFrame(cameras);
+  ASSERT_TRUE(upright.has_value());
+  const Rigid3d world_from_true = upright->world_from_dataset * dataset_from_world;
+  // The axis point is the origin (the aim point, 6 cm off the axis, is not).
+  EXPECT_LT((world_from_true * axis_point).norm(), 1e-6) << upright->basis;
+  EXPECT_GT((world_from_true * aim).norm(), 0.05);
+  EXPECT_NEAR(upright->ring_radius, radius * std::cos(elevation), 1e-6);
+  EXPECT_LT(upright->ring_rms, 1e-6);
+  EXPECT_NE(upright->basis.find("through the ring's centre"), std::string::npos);
+}
+
 TEST(ImportTest, MalformedParFileNamesTheLine) {
   TempDir dir;
   std::filesystem::copy_file(

@@ -2,17 +2,57 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cstdio>
 #include <string>
+#include <vector>
+
+#include <opencv2/imgproc.hpp>
 
 #include "carousel/core/error.h"
 #include "carousel/core/image_io.h"
+#include "carousel/core/mesh_io.h"
 #include "carousel/core/progress.h"
+#include "carousel/core/timer.h"
+#include "carousel/recon/reprojection.h"
+#include "carousel/recon/silhouette.h"
+#include "carousel/studio/checksum.h"
 #include "carousel/studio/import.h"
+#include "carousel/studio/pipeline.h"
+#include "carousel/studio/run_session.h"
 #include "carousel/studio/session.h"
 #include "carousel/testing/testing.h"
 
 namespace carousel::studio {
 namespace {
+
+// The shared Middlebury temple imported and reconstructed with the defaults, once per CTest
+// run (read only).
+std::filesystem::path ReconstructedTemple() {
+  return testing::SharedFixture("temple-reconstructed",
+                                [](const std::filesystem::path& folder) {
+                                  std::filesystem::create_directories(folder);
+                                  Progress progress;
+                                  ImportDataset(
+                                      {.source = testing::SharedDataFile(
+                                           "middlebury/templeSparseRing/templeSR_par.txt")},
+                                      folder / "temple", progress);
+                                  ReconstructSession(folder / "temple", {}, progress);
+                                }) /
+         "temple";
+}
+
+// How well a session's mesh reproduces its masks; the mean outline deviation.
+double MeanDeviation(const std::filesystem::path& session_folder,
+                     std::vector<recon::SilhouetteAgreement>* agreement) {
+  const Session session = ReadSession(session_folder);
+  *agreement = recon::MeasureSilhouetteAgreement(ReadMesh(session_folder / "recon/mesh.ply"),
+                                                 SessionViews(session_folder, session));
+  double mean = 0.0;
+  for (const auto& view : *agreement)
+    mean += view.mean_deviation_px / static_cast<double>(agreement->size());
+  return mean;
+}
 
 // The shared Middlebury temple: real photos on a folded black cloth, the object's gaps showing
 // it. Imported and reconstructed with the defaults, the mesh reproduces every view's
@@ -20,21 +60,136 @@ namespace {
 // 20; before the graph-cut segmentation and the multi-view step: 18 px and 0.47, the masks
 // swallowing the cloth).
 TEST(ReconstructTest, TheTempleRingOnBlackClothMatchesItsSilhouettes) {
-  testing::TempDir dir;
-  Progress progress;
-  ImportDataset({.source = testing::SharedDataFile("middlebury/templeSparseRing/templeSR_par.txt")},
-                dir / "temple", progress);
-  const ReconstructResult result = ReconstructSession(dir / "temple", {}, progress);
-  ASSERT_EQ(result.agreement.size(), 16u);
-  double mean = 0.0;
-  for (const auto& view : result.agreement) {
-    EXPECT_GE(view.iou, 0.95) << view.view;
-    mean += view.mean_deviation_px / static_cast<double>(result.agreement.size());
-  }
+  const std::filesystem::path temple = ReconstructedTemple();
+  std::vector<recon::SilhouetteAgreement> agreement;
+  const double mean = MeanDeviation(temple, &agreement);
+  ASSERT_EQ(agreement.size(), 16u);
+  for (const auto& view : agreement) EXPECT_GE(view.iou, 0.95) << view.view;
   EXPECT_LE(mean, 1.5);
+  std::printf("temple: outline deviation %.2f px on average\n", mean);
   // The masks hold the temple alone: about a fifth of the frame, not the cloth beside it.
-  EXPECT_LT(result.min_mask_fraction, 0.3);
-  EXPECT_GT(result.min_mask_fraction, 0.1);
+  double min_fraction = 1.0;
+  for (const SessionView& view : ReadSession(temple).views) {
+    const cv::Mat mask = ReadMask(temple / view.mask);
+    min_fraction =
+        std::min(min_fraction, cv::countNonZero(mask >= 128) / static_cast<double>(mask.total()));
+  }
+  EXPECT_LT(min_fraction, 0.3);
+  EXPECT_GT(min_fraction, 0.1);
+}
+
+// A dataset that comes with its own masks (`carousel import --masks`): the reconstruction starts
+// from them instead of segmenting the photos, and checks them against the other views. One of
+// them damaged (a hole punched through the temple) is repaired by the others' hull, never
+// carved through the model.
+TEST(ReconstructTest, GivenMasksAreUsedAndADamagedOneIsRepairedByTheOtherViews) {
+  const std::filesystem::path temple = ReconstructedTemple();
+  testing::TempDir dir;
+  const Session reference = ReadSession(temple);
+  std::filesystem::create_directories(dir / "masks");
+  const std::size_t damaged = 6;
+  cv::Mat intact;
+  for (std::size_t i = 0; i < reference.views.size(); ++i) {
+    cv::Mat mask = ReadMask(temple / reference.views[i].mask);
+    if (i == damaged) {
+      // A hole where the temple is solid: around the point deepest inside its mask.
+      intact = mask.clone();
+      cv::Mat distance;
+      cv::distanceTransform(mask >= 128, distance, cv::DIST_L2, 5);
+      double deepest = 0.0;
+      cv::Point centre;
+      cv::minMaxLoc(distance, nullptr, &deepest, nullptr, &centre);
+      cv::circle(mask, centre, static_cast<int>(0.7 * deepest), cv::Scalar(0), cv::FILLED);
+      ASSERT_LT(recon::MaskIoU(mask, intact), 0.97);
+    }
+    // Dataset masks are often 0/1.
+    cv::Mat binary = (mask >= 128) / 255;
+    WriteImage(dir / "masks" / std::filesystem::path(reference.views[i].image).filename(), binary);
+  }
+  Progress progress;
+  ImportDataset({.source = testing::SharedDataFile("middlebury/templeSparseRing/templeSR_par.txt"),
+                 .masks_dir = dir / "masks"},
+                dir / "given", progress);
+  const Session imported = ReadSession(dir / "given");
+  for (const SessionView& view : imported.views) {
+    ASSERT_FALSE(view.given_mask.empty());
+    EXPECT_EQ(FileSha256(dir / "given" / view.given_mask), view.given_mask_sha256);
+  }
+  const ReconstructResult result = ReconstructSession(dir / "given", {}, progress);
+  EXPECT_EQ(result.given_masks, 16);
+  EXPECT_GE(result.redecided, 1);
+  const Session session = ReadSession(dir / "given");
+  const cv::Mat repaired = ReadMask(dir / "given" / session.views[damaged].mask);
+  EXPECT_GE(recon::MaskIoU(repaired, intact), 0.98);
+  std::vector<recon::SilhouetteAgreement> agreement;
+  EXPECT_LE(MeanDeviation(dir / "given", &agreement), 1.5);
+  for (const auto& view : agreement) EXPECT_GE(view.iou, 0.95) << view.view;
+  // The given (damaged) mask itself is kept as it was.
+  EXPECT_LT(recon::MaskIoU(ReadMask(dir / "given" / session.views[damaged].given_mask), intact),
+            0.97);
+  // A mask of the wrong size, or a missing one, is named.
+  WriteImage(dir / "masks/templeSR0003.png", cv::Mat::zeros(10, 10, CV_8UC1));
+  CAROUSEL_EXPECT_THROW_WITH(
+      ImportDataset(
+          {.source = testing::SharedDataFile("middlebury/templeSparseRing/templeSR_par.txt"),
+           .masks_dir = dir / "masks"},
+          dir / "bad", progress),
+      FormatError, "templeSR0003.png: mask is 10x10, its photo templeSR0003.png is 640x480");
+  std::filesystem::remove(dir / "masks/templeSR0003.png");
+  CAROUSEL_EXPECT_THROW_WITH(
+      ImportDataset(
+          {.source = testing::SharedDataFile("middlebury/templeSparseRing/templeSR_par.txt"),
+           .masks_dir = dir / "masks"},
+          dir / "bad", progress),
+      IoError, "no mask for photo templeSR0003.png");
+  EXPECT_FALSE(std::filesystem::exists(dir / "bad"));
+}
+
+// A mask damaged after the reconstruction (a hole punched into one view's mask): `carousel
+// process` notices the edit, keeps the damaged file under masks/given/ and starts from it, and
+// the other views repair it; nothing is carved through the model.
+TEST(ReconstructTest, AMaskDamagedAfterTheReconstructionIsRepairedByProcess) {
+  testing::TempDir dir;
+  RunOptions run;
+  run.product = "damaged-mask";
+  run.out = dir.path();
+  run.sim.scene = "bottle";
+  run.sim.data_dir = testing::SharedDataDir();
+  run.sim.rig.width = 480;
+  run.sim.rig.height = 320;
+  run.sim.stops = 8;
+  run.publish_model = false;
+  Progress progress;
+  const std::filesystem::path folder = RunSession(run, progress).session;
+  const std::string damaged = "masks/cam0_stop03.png";
+  const cv::Mat intact = ReadMask(folder / damaged);
+  cv::Mat mask = intact.clone();
+  cv::Mat distance;
+  cv::distanceTransform(mask >= 128, distance, cv::DIST_L2, 5);
+  double deepest = 0.0;
+  cv::Point centre;
+  cv::minMaxLoc(distance, nullptr, &deepest, nullptr, &centre);
+  cv::circle(mask, centre, static_cast<int>(0.7 * deepest), cv::Scalar(0), cv::FILLED);
+  ASSERT_LT(recon::MaskIoU(mask, intact), 0.95);
+  WriteImage(folder / damaged, mask);
+  const std::string damaged_bytes = testing::ReadBytes(folder / damaged);
+
+  ProcessOptions options;
+  options.publish_model = false;
+  Stopwatch watch;
+  const ProcessResult result = ProcessSession(folder, options, progress);
+  std::printf("a damaged mask repaired by process in %.2f s (reconstruct %.2f s)\n",
+              watch.ElapsedSeconds(), result.seconds_reconstruct);
+  EXPECT_NE(result.reconstruct_reason.find("mask " + damaged + " edited"), std::string::npos)
+      << result.reconstruct_reason;
+  ASSERT_TRUE(result.reconstruct.has_value());
+  EXPECT_EQ(result.reconstruct->given_masks, 1);
+  EXPECT_GE(result.reconstruct->redecided, 1);
+  EXPECT_GE(recon::MaskIoU(ReadMask(folder / damaged), intact), 0.98);
+  EXPECT_EQ(testing::ReadBytes(folder / "masks/given/cam0_stop03.png"), damaged_bytes);
+  for (const auto& view : result.reconstruct->agreement) EXPECT_GE(view.iou, 0.95) << view.view;
+  // Current from now on.
+  EXPECT_EQ(ProcessSession(folder, options, progress).reconstruct_reason, "current");
 }
 
 // A view whose pose is wrong carves the others' hull apart: the reconstruction stops naming

@@ -41,6 +41,11 @@ struct ImportOptions {
   std::string product;      // empty = the dataset's folder name
   bool overwrite = false;   // replace an existing session folder
   bool keep_frame = false;  // keep the dataset's world frame instead of standing it upright
+  // Folder of the silhouettes that come with the dataset (8-bit, object bright; 0/1 masks are
+  // scaled), one per photo named like it (<stem>.png, .pgm, .pbm, .bmp, .tif, .jpg, or the
+  // photo's full name + .png): they become the views' given masks (masks/given/), which the
+  // reconstruction starts from and checks against the other views. Empty = none.
+  std::filesystem::path masks_dir;
   void Validate() const;
 };
 
@@ -53,6 +58,10 @@ struct ImportResult {
 struct UprightFrameResult {
   Rigid3d world_from_dataset;  // maps the dataset's points into the upright frame
   std::string basis;           // in words: which evidence fixed the up axis and its sign
+  // A ring of cameras: its radius and how far the centres stray from the fitted circle (RMS),
+  // in the dataset's units; 0 when the cameras form no ring.
+  double ring_radius = 0.0;
+  double ring_rms = 0.0;
 };
 
 // The upright frame of a capture, from its cameras alone. Up is the axis of the ring the camera
@@ -60,8 +69,10 @@ struct UprightFrameResult {
 // dome, the mean of the cameras' image-up directions instead). Its sign makes the cameras look
 // down on the object, as studio cameras do; a ring looking straight across takes the sign the
 // photos' up direction agrees with (cameras may be rolled, so that comes second). The origin is
-// the point nearest every optical axis. std::nullopt when the cameras fix no axis (fewer than 3,
-// or all on a line, or looking every way).
+// on the ring's axis (the centre of the circle fitted to the camera centres in the ring's
+// plane: a turntable's axis, wherever the cameras aim), at the height of the point nearest every
+// optical axis; without a ring, that point itself. std::nullopt when the cameras fix no axis
+// (fewer than 3, or all on a line, or looking every way).
 std::optional<UprightFrameResult> UprightFrame(const std::vector<CameraModel>& cameras);
 
 // \throw IoError (missing file or photo, target exists), FormatError (malformed line, naming
