@@ -519,12 +519,13 @@ TEST(RunSessionTest, FullDiskAndUnwritableFolderAreClearErrorsAndLoseNothing) {
       text, ::testing::HasSubstr("kill-test/recon/"));  // names the file that could not be written
   const auto session = dir.path() / "out" / "kill-test";
   const auto photos = Recorded(session);
-  EXPECT_EQ(photos.size(), 6u);  // every photo was taken and recorded before the failure
+  // Every photo (and its mask shot) was taken and recorded before the failure.
+  EXPECT_EQ(photos.size(), 12u);
   for (const auto& [image, sha] : photos) EXPECT_EQ(FileSha256(session / image), sha) << image;
   // With room again, the session resumes without retaking anything.
   Progress progress;
   const RunResult result = ResumeSession(session, progress);
-  EXPECT_EQ(result.photos_kept, 6);
+  EXPECT_EQ(result.photos_kept, 12);
   EXPECT_EQ(result.photos_taken, 0);
   EXPECT_TRUE(std::filesystem::exists(session / "model" / "model.glb"));
 
