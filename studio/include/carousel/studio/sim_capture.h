@@ -39,10 +39,14 @@ struct SimCaptureOptions {
   sim::SimRigOptions rig;
   // Turntable stops per turn (photos per camera), evenly spaced from 0 deg; >= 1.
   int stops = 16;
-  // Renderer settings; noise on by default like a real sensor.
+  // Renderer settings; by default what a real studio shows: sensor noise, the key light's soft
+  // cast shadow on the plate and the sweep, the backdrop light's falloff and mild vignetting.
   sim::RenderOptions render = [] {
     sim::RenderOptions options;
     options.noise_sigma = 1.5;
+    options.cast_shadow = 0.4;
+    options.backdrop_falloff = 0.2;
+    options.vignetting = 0.1;
     return options;
   }();
   int jpeg_quality = 95;  // 1..100
