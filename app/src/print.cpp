@@ -8,7 +8,12 @@ namespace carousel::app {
 void PrintReconstruct(const std::filesystem::path& s, const studio::ReconstructResult& result,
                       std::ostream& out) {
   out << std::fixed << std::setprecision(2) << "masks " << (s / "masks").string() << ": "
-      << result.views << " silhouettes (" << result.seconds_silhouettes << " s)\n"
+      << result.views << " silhouettes (" << result.method
+      << (result.given_masks > 0 ? ", " + std::to_string(result.given_masks) + " given" : "")
+      << (result.redecided > 0
+              ? ", " + std::to_string(result.redecided) + " repaired by the other views"
+              : "")
+      << "; " << result.seconds_silhouettes << " s)\n"
       << "hull " << (s / "recon/hull.ply").string() << ": " << result.hull_faces << " faces, "
       << std::setprecision(3) << result.voxel_size_m * 1e3 << " mm voxels (" << std::setprecision(2)
       << result.seconds_hull << " s)\n"

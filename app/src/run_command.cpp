@@ -76,6 +76,7 @@ int RunOneButton(RunArgs& args, Io& io) {
   if (result.photos_taken > 0 && result.max_trigger_skew_ms > 0)
     io.out << std::fixed << std::setprecision(1) << "trigger skew between cameras: at most "
            << result.max_trigger_skew_ms << " ms\n";
+  if (result.reconstruct) PrintReconstruct(result.session, *result.reconstruct, io.out);
   if (result.textured) PrintTexture(result.session, result.texture, io.out);
   if (result.publish) PrintPublish(result.session, *result.publish, io.out);
   const auto model = result.session / "model";

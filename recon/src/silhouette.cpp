@@ -56,6 +56,11 @@ constexpr double kMaxBackgroundScale = 1.4;
 constexpr double kMaxBackgroundChroma = 0.15;
 // The second matting pass takes the colours either side from at most this far, pixels.
 constexpr float kLocalReach = 2.0f;
+// Keyed silhouettes whose outline runs along the plate's rim for this fraction of its length
+// in most views (the median) stop where the plate does: measured 16-17 % in every view of a
+// white bottle before a white sweep, at most 7.5 % in half of the views of the shared models
+// (a low shoe's top near the far rim: 16 % in a few).
+constexpr double kMaxRimOutline = 0.13;
 // A mask shot's lit panel is at least this bright (8-bit levels at the centre).
 constexpr double kMinBacklitLevel = 96.0;
 // A hole the object encloses in a mask shot whose mean alpha reaches this lets the panel
@@ -600,6 +605,17 @@ void CheckClearOfBorder(const cv::Mat& fg, const std::string& name) {
   }
 }
 
+// The fraction of a silhouette's outline that runs along the turntable plate's rim band: where
+// a product as light as the backdrop stops being seen (it stands out before the plate only).
+double RimOutlineFraction(const cv::Mat& fg, const cv::Mat& rim) {
+  cv::Mat outline;
+  cv::morphologyEx(fg, outline, cv::MORPH_GRADIENT,
+                   cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3)));
+  outline &= fg;
+  const double length = cv::countNonZero(outline);
+  return length > 0.0 ? cv::countNonZero(outline & rim) / length : 0.0;
+}
+
 // A photo whose object is mostly clipped white has lost its outline against a light backdrop.
 // \throw FormatError naming the photo.
 void CheckExposure(const cv::Mat& image, const cv::Mat& fg, const std::string& name) {
@@ -1108,6 +1124,7 @@ cv::Mat SegmentAtWorkingSize(const cv::Mat& image, const CameraModel& camera,
   if (options.check_border) CheckClearOfBorder(fg, name);
   CheckExposure(image, fg, name);
   if (stats != nullptr) {
+    stats->rim_outline_fraction = have_plate ? RimOutlineFraction(fg, rim) : 0.0;
     stats->backdrop_residual = backdrop.rms;
     stats->components = components;
   }
@@ -1335,6 +1352,30 @@ std::vector<std::size_t> DisagreeingViews(const std::vector<View>& views, Silhou
   return disagreeing;
 }
 
+// Keyed silhouettes that stop at the plate's rim in most views: the product above the plate
+// matches the backdrop. \throw FormatError naming the view that shows it most.
+void CheckNotCutByThePlate(const std::vector<View>& views,
+                           const std::vector<SilhouetteStats>& stats) {
+  if (stats.size() < 3) return;
+  std::vector<double> fractions;
+  for (const SilhouetteStats& s : stats) fractions.push_back(s.rim_outline_fraction);
+  std::vector<double> sorted = fractions;
+  std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2),
+                   sorted.end());
+  const double median = sorted[sorted.size() / 2];
+  if (median < kMaxRimOutline) return;
+  const std::size_t worst = static_cast<std::size_t>(
+      std::max_element(fractions.begin(), fractions.end()) - fractions.begin());
+  std::ostringstream reason;
+  reason << "the silhouettes stop at the turntable plate's rim (" << cvRound(100.0 * median)
+         << "% of their outline runs along it in half of the views, "
+         << cvRound(100.0 * fractions[worst])
+         << "% here): above the plate the product looks like the backdrop, so keying keeps only "
+            "what stands before the plate; take backlit mask shots (--mask-shots backlit) or use "
+            "a backdrop of another colour";
+  throw FormatError(views[worst].name(), reason.str());
+}
+
 }  // namespace
 
 cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
@@ -1451,6 +1492,7 @@ SilhouettesResult ComputeSilhouettes(const std::vector<View>& views,
     }
   });
   progress.EndStage();
+  CheckNotCutByThePlate(views, result.stats);
   if (options.multi_view && views.size() >= kMinConsistencyViews)
     MakeConsistent(views, backgrounds, options, hull, &result, progress, mask_shots);
   return result;

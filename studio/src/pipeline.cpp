@@ -58,8 +58,8 @@ std::string Describe(const ReconstructOptions& o) {
              "proxy", h.proxy_max_faces)("faces", m.target_faces)("smooth", m.smoothing_iterations)(
              "lambda", m.taubin_lambda)("mu", m.taubin_mu)("remesh", m.remesh)(
              "remesh_iterations", m.remesh_iterations)("remesh_factor", m.remesh_face_factor)(
-             "normal", m.max_normal_deviation_deg)("aspect", m.max_aspect_ratio)("volume",
-                                                                                 m.target_volume_m3)
+             "normal", m.max_normal_deviation_deg)("aspect", m.max_aspect_ratio)(
+             "volume", m.target_volume_m3)("max_deviation", o.max_outline_deviation_px)
       .str();
 }
 

@@ -1,6 +1,7 @@
 #include "carousel/studio/reconstruct.h"
 
 #include <algorithm>
+#include <limits>
 #include <map>
 #include <numeric>
 #include <sstream>
@@ -48,10 +49,18 @@ std::vector<cv::Mat> LoadBackgrounds(const std::filesystem::path& folder, const 
   return backgrounds;
 }
 
-// A hull that broke into more pieces than this (or lost a quarter of its faces to small
-// pieces) is broken: mesh optimization would grind on it.
+// A hull that broke into more pieces than this while some view disagrees with the others
+// (keeps less than kMinPieceConsistency of their hull), or that lost a quarter of its faces to
+// small pieces, is broken: mesh optimization would grind on it. (A whole hull of a large
+// product at full resolution sheds thousands of sub-voxel crumbs in its concavities, a few
+// percent of its faces, with every view consistent: not broken.)
 constexpr std::size_t kMaxHullPieces = 100;
+constexpr double kMinPieceConsistency = 0.9;
 constexpr double kMaxDroppedFaceFraction = 0.25;
+// The mesh gets at most this many times --faces to keep its outline near the silhouettes.
+constexpr int kMaxFaceFactor = 8;
+// ... and twice the faces only while they bring the outline at least this much nearer.
+constexpr double kMinFaceGain = 0.9;
 // The optimized mesh reproduces every silhouette at least this well, or a view is at fault.
 constexpr double kMinAgreementIoU = 0.8;
 // Longest side of a diagnostic overlay, pixels.
@@ -199,7 +208,15 @@ const OptionTable<ReconstructOptions>& ReconstructOptions::Fields() {
       OptionTable<ReconstructOptions>()
           .Include(&ReconstructOptions::silhouettes, recon::SilhouetteOptions::Fields())
           .Include(&ReconstructOptions::hull, recon::VisualHullOptions::Fields())
-          .Include(&ReconstructOptions::mesh, recon::MeshOptimizationOptions::Fields());
+          .Include(&ReconstructOptions::mesh, recon::MeshOptimizationOptions::Fields())
+          .Add(&ReconstructOptions::max_outline_deviation_px,
+               {.name = "max-outline-deviation",
+                .help = "a mesh whose outline strays further from the silhouettes on average is "
+                        "made again with twice the faces (up to 8x --faces)",
+                .unit = "px",
+                .min = 0,
+                .special = 0,
+                .special_meaning = "never"});
   return table;
 }
 
@@ -285,9 +302,14 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
     throw FormatError(e.path(), e.reason() + "; each view's mask outline on its photo: " + where);
   }
   const std::size_t kept_faces = hull.mesh.n_faces();
-  if (hull.components_dropped > kMaxHullPieces ||
-      static_cast<double>(hull.faces_dropped) >
-          kMaxDroppedFaceFraction * static_cast<double>(kept_faces + hull.faces_dropped)) {
+  const double dropped_fraction =
+      static_cast<double>(hull.faces_dropped) /
+      static_cast<double>(std::max<std::size_t>(1, kept_faces + hull.faces_dropped));
+  const bool views_disagree = !hull.view_consistency.empty() &&
+                              *std::min_element(hull.view_consistency.begin(),
+                                                hull.view_consistency.end()) < kMinPieceConsistency;
+  if ((hull.components_dropped > kMaxHullPieces && views_disagree) ||
+      dropped_fraction > kMaxDroppedFaceFraction) {
     const std::vector<std::size_t> culprits = CarvingViews(hull.view_consistency, 0.9, 3);
     const std::string where =
         WriteDiagnostics(session_folder, views, silhouettes.masks, culprits, &hull.mesh);
@@ -308,19 +330,46 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
   result.seconds_hull = watch.ElapsedSeconds();
 
   // Optimized mesh -> recon/mesh.ply.
+  // How well the mesh reproduces the silhouettes: calibration or mask trouble shows here. A
+  // mesh whose outline strays further than max_outline_deviation_px on average is made again
+  // with twice the faces (up to kMaxFaceFactor times --faces): photos sharp enough to show
+  // more than the face budget holds get it.
   watch.Restart();
   recon::MeshOptimizationOptions mesh_options = options.mesh;
   mesh_options.target_volume_m3 = hull.volume_m3;
-  const recon::MeshOptimizationResult mesh =
-      recon::OptimizeMesh(hull.OptimizationInput(), mesh_options, progress);
+  recon::MeshOptimizationResult mesh;
+  std::vector<recon::SilhouetteAgreement> agreement;
+  double seconds_agreement = 0.0;
+  double previous = std::numeric_limits<double>::infinity();
+  for (;;) {
+    recon::MeshOptimizationResult candidate =
+        recon::OptimizeMesh(hull.OptimizationInput(), mesh_options, progress);
+    Stopwatch measure;
+    std::vector<recon::SilhouetteAgreement> measured =
+        recon::MeasureSilhouetteAgreement(candidate.mesh, views, options.hull.threads);
+    seconds_agreement += measure.ElapsedSeconds();
+    double deviation = 0.0;
+    for (const recon::SilhouetteAgreement& a : measured)
+      deviation += a.mean_deviation_px / static_cast<double>(measured.size());
+    // More faces that bring the outline no nearer (the silhouettes or the calibration are
+    // what stray) are not kept.
+    if (deviation > kMinFaceGain * previous) break;
+    mesh = std::move(candidate);
+    agreement = std::move(measured);
+    previous = deviation;
+    if (options.max_outline_deviation_px <= 0.0 || deviation <= options.max_outline_deviation_px ||
+        mesh_options.target_faces * 2 > kMaxFaceFactor * options.mesh.target_faces)
+      break;
+    mesh_options.target_faces *= 2;
+    CAROUSEL_LOG_INFO("mesh: outline " << deviation << " px from the silhouettes on average, over "
+                                       << options.max_outline_deviation_px << " px: again with "
+                                       << mesh_options.target_faces << " faces");
+  }
+  result.agreement = std::move(agreement);
   WriteMesh(mesh.mesh, session_folder / "recon/mesh.ply");
   result.mesh_faces = mesh.mesh.n_faces();
-  result.seconds_mesh = watch.ElapsedSeconds();
-
-  // How well the mesh reproduces the silhouettes: calibration or mask trouble shows here.
-  watch.Restart();
-  result.agreement = recon::MeasureSilhouetteAgreement(mesh.mesh, views, options.hull.threads);
-  result.seconds_agreement = watch.ElapsedSeconds();
+  result.seconds_mesh = watch.ElapsedSeconds() - seconds_agreement;
+  result.seconds_agreement = seconds_agreement;
   {
     std::vector<std::size_t> disagreeing;
     for (std::size_t v = 0; v < result.agreement.size(); ++v)

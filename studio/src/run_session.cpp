@@ -28,9 +28,9 @@ constexpr const char* kSessionCalibration = "calibration.json";
 // The renderer settings and the capture plan's mask shots, which run.json keeps by their flag
 // names.
 const OptionTable<SimCaptureOptions>& SimRenderFields() {
-  static const OptionTable<SimCaptureOptions> table =
-      SimCaptureOptions::Fields().Only({"material", "exposure", "contact-shadow", "cast-shadow",
-                                        "backdrop-falloff", "vignetting", "mask-shots"});
+  static const OptionTable<SimCaptureOptions> table = SimCaptureOptions::Fields().Only(
+      {"material", "exposure", "contact-shadow", "cast-shadow", "backdrop-falloff", "vignetting",
+       "mask-shots", "backdrop"});
   return table;
 }
 
@@ -175,6 +175,7 @@ RunResult Continue(const std::filesystem::path& folder, const RunOptions& option
                                                   .publish_model = options.publish_model},
                                                  progress);
   result.reconstructed = processed.reconstruct.has_value();
+  result.reconstruct = processed.reconstruct;
   result.textured = processed.texture.has_value();
   if (processed.texture) result.texture = *processed.texture;
   result.publish = processed.publish;

@@ -1,6 +1,7 @@
 #include "carousel/studio/sim_capture.h"
 
 #include <cmath>
+#include <cstdio>
 #include <map>
 #include <numbers>
 
@@ -67,10 +68,10 @@ Eigen::Vector3d ParseBackdropColour(const std::string& text, const std::string& 
 
 const std::vector<std::string>& RunSimFieldNames() {
   static const std::vector<std::string> names = {
-      "scene",      "data",      "views",    "size",           "elevations",    "focal-mm",
-      "distance",   "noise",     "seed",     "jpeg-quality",   "target-height", "scale",
-      "yaw-deg",    "material",  "exposure", "contact-shadow", "cast-shadow",   "backdrop-falloff",
-      "vignetting", "mask-shots"};
+      "scene",      "data",       "views",    "size",           "elevations",    "focal-mm",
+      "distance",   "noise",      "seed",     "jpeg-quality",   "target-height", "scale",
+      "yaw-deg",    "material",   "exposure", "contact-shadow", "cast-shadow",   "backdrop-falloff",
+      "vignetting", "mask-shots", "backdrop"};
   return names;
 }
 
@@ -122,9 +123,28 @@ const OptionTable<SimCaptureOptions>& SimCaptureOptions::Fields() {
            .advanced = true},
           [](O& o) -> OptionRef { return &o.render.samples_per_axis; });
     t.AddText(
-        {.name = "backdrop", .help = "white, grey, green, black or #rrggbb"},
-        [](const O&) { return std::string(); },
+        {.name = "backdrop",
+         .help = "light (the default sweep, lighter at the top), white, grey, green, black or "
+                 "#rrggbb (10% darker at the bottom)"},
+        [](const O& o) {
+          const sim::RenderOptions defaults;
+          if (o.render.backdrop_top == defaults.backdrop_top &&
+              o.render.backdrop_bottom == defaults.backdrop_bottom)
+            return std::string("light");
+          char text[8];
+          std::snprintf(text, sizeof text, "#%02x%02x%02x",
+                        static_cast<int>(std::lround(255.0 * o.render.backdrop_top.x())),
+                        static_cast<int>(std::lround(255.0 * o.render.backdrop_top.y())),
+                        static_cast<int>(std::lround(255.0 * o.render.backdrop_top.z())));
+          return std::string(text);
+        },
         [](O& o, const std::string& text) {
+          if (text == "light") {
+            const sim::RenderOptions defaults;
+            o.render.backdrop_top = defaults.backdrop_top;
+            o.render.backdrop_bottom = defaults.backdrop_bottom;
+            return;
+          }
           const Eigen::Vector3d colour = ParseBackdropColour(text, "backdrop");
           o.render.backdrop_top = colour;
           o.render.backdrop_bottom = 0.9 * colour;

@@ -167,6 +167,19 @@ INSTANTIATE_TEST_SUITE_P(
       return name;
     });
 
+// White on the white sweep, keyed: only what stands before the plate keys, and the silhouettes
+// stop at its rim in every view; refused with what to do, instead of a bottle's stump.
+TEST(SilhouetteTest, KeyedSilhouettesCutByThePlatesRimAreRefused) {
+  const sim::SimViews& capture = testing::SimulatedCapture("bottle/white/white/studio+backlit");
+  SilhouetteOptions key;
+  key.method = SilhouetteMethod::kKey;
+  Progress progress;
+  CAROUSEL_EXPECT_THROW_WITH(ComputeSilhouettes(capture.views, {}, key, progress), FormatError,
+                             "the silhouettes stop at the turntable plate's rim");
+  CAROUSEL_EXPECT_THROW_WITH(ComputeSilhouettes(capture.views, {}, key, progress), FormatError,
+                             "take backlit mask shots");
+}
+
 // A backlit mask shot with the backlight off, or of the empty panel, is named; kBacklit
 // without mask shots is refused.
 TEST(SilhouetteTest, BadMaskShotsAreNamed) {

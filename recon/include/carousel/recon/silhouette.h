@@ -107,7 +107,9 @@ struct SilhouetteOptions {
 struct SilhouetteStats {
   double object_fraction = 0.0;    // mask area / image area
   double backdrop_residual = 0.0;  // RMS of the fitted backdrop model on its inliers, levels
-  int components = 0;              // object components kept
+  // Keyed with the plate in view: the fraction of the outline along the plate's rim band.
+  double rim_outline_fraction = 0.0;
+  int components = 0;  // object components kept
   // Multi-view consistency: pixels of the first segmentation outside the other views' hull,
   // and backdrop pixels well inside it (both at the priors' size: at most 1024 along the
   // longest side); whether the view was segmented again, and what that changed (photo pixels).
@@ -143,6 +145,8 @@ struct SilhouettesResult {
 };
 
 // Silhouettes for all views (in parallel), then multi-view consistency (options.multi_view).
+// Keyed silhouettes that stop at the plate's rim in most views (a product as light as the
+// backdrop: only what stands before the plate keys) are refused, naming a view.
 // `backgrounds`: per view (kDifference), may share Mats between the views of one camera;
 // empty otherwise. `hull`: the carving the consistency step assumes (floor). `mask_shots`:
 // per view, its backlit mask shot (the view's camera; kBacklit, and kAuto takes them), or

@@ -25,6 +25,9 @@ struct ReconstructOptions {
   recon::SilhouetteOptions silhouettes;
   recon::VisualHullOptions hull;
   recon::MeshOptimizationOptions mesh;
+  // A mesh whose outline deviates further than this from the silhouettes on average (pixels)
+  // is made again with twice the faces, up to 8 x mesh.target_faces; 0 = never.
+  double max_outline_deviation_px = 1.0;
   // The silhouette, hull and mesh tables together (flag names are unique across them).
   static const OptionTable<ReconstructOptions>& Fields();
   void Validate() const;

@@ -60,6 +60,7 @@ struct RunResult {
   int photos_retaken = 0;            // damaged or missing: moved aside and taken again
   double max_trigger_skew_ms = 0.0;  // largest spread of the cameras' triggers at a stop
   bool reconstructed = false, textured = false;  // stages run (not skipped) this time
+  std::optional<ReconstructResult> reconstruct;  // the reconstruction, when it ran
   TextureSessionResult texture;
   std::optional<PublishSessionResult> publish;        // the publish stage, when it ran
   std::optional<CalibrateSessionResult> calibration;  // calibration sessions, when it ran
