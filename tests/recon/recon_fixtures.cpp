@@ -28,9 +28,13 @@ const sim::SimViews& SimulatedCapture(const std::string& name) {
   const std::string material = parts.size() > 1 ? parts[1] : "none";
   const std::string backdrop =
       parts.size() > 2 ? parts[2] : (material == "black" ? "black" : "light");
-  const std::string flags = parts.size() > 3 ? "+" + parts[3] + "+" : "";
-  auto flag = [&](const char* name) {
-    return flags.find("+" + std::string(name) + "+") != std::string::npos;
+  // "+flag+flag+" (built by append: GCC 12 warns falsely on "+" + string).
+  std::string flags = "+";
+  if (parts.size() > 3) flags.append(parts[3]).append("+");
+  auto flag = [&](const char* word) {
+    std::string wanted = "+";
+    wanted.append(word).append("+");
+    return flags.find(wanted) != std::string::npos;
   };
   sim::Scene scene;
   constexpr double kSize = 0.25;

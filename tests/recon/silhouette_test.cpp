@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <ostream>
 #include <string>
+#include <vector>
 
 #include <opencv2/imgproc.hpp>
 
@@ -145,32 +146,40 @@ TEST_P(HardProductSilhouettes, MasksAndMeshMatchTheTruth) {
       opening_pixels, chamfer_mm);
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Materials, HardProductSilhouettes,
-    ::testing::Values(
-        HardProduct{"bottle/white/white/studio+backlit", SilhouetteMethod::kBacklit, 0.998, 1.3},
-        HardProduct{"bottle/white/grey/studio", SilhouetteMethod::kKey, 0.995, 1.3},
-        HardProduct{"bottle/black/black/studio+backlit", SilhouetteMethod::kKey, 0.995, 1.3},
-        HardProduct{"bottle/black/black/studio+backlit", SilhouetteMethod::kBacklit, 0.998, 1.3},
-        HardProduct{"bottle/glossy/light/studio+backlit", SilhouetteMethod::kKey, 0.995, 1.3},
-        HardProduct{"bottle/glossy/light/studio+backlit", SilhouetteMethod::kBacklit, 0.998, 1.3},
-        HardProduct{"mug/none/light/studio+backlit", SilhouetteMethod::kKey, 0.995, 1.6},
-        HardProduct{"mug/none/light/studio+backlit", SilhouetteMethod::kBacklit, 0.998, 1.6},
-        HardProduct{"bottle/see-through/light/studio+backlit", SilhouetteMethod::kBacklit, 0.995,
-                    1.4},
-        HardProduct{"bottle/none/light/shadow", SilhouetteMethod::kKey, 0.99, 1.3}),
-    [](const auto& param_info) {
-      std::string name =
-          param_info.param.scene + "_" + SilhouetteMethodName(param_info.param.method);
-      for (char& c : name)
-        if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
-      return name;
-    });
+std::vector<HardProduct> HardProducts() {
+#if defined(CAROUSEL_SANITIZE_BUILD)
+  // Under the sanitizers (ten times slower) the code path of the mask shots on one product
+  // (the other tests key); the figures are the Release build's.
+  return {
+      HardProduct{"bottle/glossy/light/studio+backlit", SilhouetteMethod::kBacklit, 0.998, 1.3}};
+#else
+  return {HardProduct{"bottle/white/white/studio+backlit", SilhouetteMethod::kBacklit, 0.998, 1.3},
+          HardProduct{"bottle/white/grey/studio", SilhouetteMethod::kKey, 0.995, 1.3},
+          HardProduct{"bottle/black/black/studio+backlit", SilhouetteMethod::kKey, 0.995, 1.3},
+          HardProduct{"bottle/black/black/studio+backlit", SilhouetteMethod::kBacklit, 0.998, 1.3},
+          HardProduct{"bottle/glossy/light/studio+backlit", SilhouetteMethod::kKey, 0.995, 1.3},
+          HardProduct{"bottle/glossy/light/studio+backlit", SilhouetteMethod::kBacklit, 0.998, 1.3},
+          HardProduct{"mug/none/light/studio+backlit", SilhouetteMethod::kKey, 0.995, 1.6},
+          HardProduct{"mug/none/light/studio+backlit", SilhouetteMethod::kBacklit, 0.998, 1.6},
+          HardProduct{"bottle/see-through/light/studio+backlit", SilhouetteMethod::kBacklit, 0.995,
+                      1.4},
+          HardProduct{"bottle/none/light/shadow", SilhouetteMethod::kKey, 0.99, 1.3}};
+#endif
+}
+
+INSTANTIATE_TEST_SUITE_P(Materials, HardProductSilhouettes, ::testing::ValuesIn(HardProducts()),
+                         [](const auto& param_info) {
+                           std::string name = param_info.param.scene + "_" +
+                                              SilhouetteMethodName(param_info.param.method);
+                           for (char& c : name)
+                             if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
+                           return name;
+                         });
 
 // White on the white sweep, keyed: only what stands before the plate keys, and the silhouettes
 // stop at its rim in every view; refused with what to do, instead of a bottle's stump.
 TEST(SilhouetteTest, KeyedSilhouettesCutByThePlatesRimAreRefused) {
-  const sim::SimViews& capture = testing::SimulatedCapture("bottle/white/white/studio+backlit");
+  const sim::SimViews& capture = testing::SimulatedCapture("bottle/white/white/studio");
   SilhouetteOptions key;
   key.method = SilhouetteMethod::kKey;
   Progress progress;
