@@ -49,13 +49,20 @@ void PrintTexture(const std::filesystem::path& session, const studio::TextureSes
       << r.seconds_export << " s (PNG " << r.files.seconds_png << " s, GLB " << r.files.seconds_glb
       << " s), total " << r.seconds_total << " s; report "
       << (session / "model" / "report.json").string() << "\n";
-  for (const auto& h : r.held_out)
+  for (const auto& h : r.held_out) {
     out << "held-out view " << h.view << ": PSNR " << h.psnr_db << " dB, SSIM "
-        << std::setprecision(4) << h.ssim << ", silhouette IoU " << h.mask_agreement
-        << std::setprecision(2) << "\n";
+        << std::setprecision(4) << h.ssim;
+    if (h.has_reference) {
+      out << ", silhouette IoU " << h.mask_agreement;
+    } else {
+      out << " (no mask: over the model's own silhouette)";
+    }
+    out << std::setprecision(2) << "\n";
+  }
   if (!r.held_out.empty())
     out << "held-out mean: PSNR " << r.mean_psnr_db << " dB, SSIM " << std::setprecision(4)
         << r.mean_ssim << "\n";
+  for (const std::string& w : r.warnings) out << "warning: " << w << "\n";
 }
 
 void PrintPublish(const std::filesystem::path& session, const studio::PublishSessionResult& r,

@@ -1,5 +1,6 @@
 // What a held-out view's rendering is scored over (texture and publish stages): the view's
-// ground-truth mask when the session has one (simulated sessions), else its silhouette.
+// ground-truth mask when the session has one (simulated sessions), else its silhouette, else
+// (a dataset imported without masks) nothing: the rendering's own coverage.
 #pragma once
 
 #include <filesystem>
@@ -20,7 +21,8 @@ inline cv::Mat HeldOutReferenceMask(const std::filesystem::path& folder, const S
   const auto i = static_cast<std::size_t>(index);
   const std::string truth =
       i < session.ground_truth.masks.size() ? session.ground_truth.masks[i] : std::string();
-  return !truth.empty() ? ReadMask(folder / truth) : views.at(i).Mask();
+  if (!truth.empty()) return ReadMask(folder / truth);
+  return views.at(i).HasMask() ? views.at(i).Mask() : cv::Mat();
 }
 
 }  // namespace carousel::studio

@@ -46,20 +46,30 @@ TextureSessionResult TextureSession(const std::filesystem::path& session_folder,
   if (!std::filesystem::exists(mesh_path))
     throw IoError(mesh_path, "no reconstructed mesh (run `carousel reconstruct` first)");
   std::vector<View> views = SessionViews(session_folder, session);
-  if (options.grouping.correction)
-    for (std::size_t i = 0; i < views.size(); ++i)
-      if (session.views[i].mask.empty())
-        throw FormatError(
-            session_folder / kManifestName,
-            "view " + std::to_string(i) + " (" + session.views[i].image +
-                ") has no mask (run `carousel reconstruct` first, or --no-correction)");
-  Mesh mesh = ReadMesh(mesh_path, {.read_uvs = false});
   TextureSessionResult result;
+  // The missing-colour correction needs each photo's own silhouette: the mesh's projection
+  // would agree with the mesh everywhere and correct nothing. Without masks (a dataset
+  // imported with its mesh) it is skipped, and the run says so.
+  bool correction = options.grouping.correction;
+  const auto no_mask = [](const SessionView& v) { return v.mask.empty(); };
+  const auto unmasked = std::count_if(session.views.begin(), session.views.end(), no_mask);
+  if (correction && unmasked > 0) {
+    correction = false;
+    result.warnings.push_back(
+        std::to_string(unmasked) + " of " + std::to_string(session.views.size()) +
+        " views have no mask (the first: " +
+        std::find_if(session.views.begin(), session.views.end(), no_mask)->image +
+        "): the missing-colour correction is skipped (masks come from `carousel reconstruct` "
+        "or `carousel import --masks`)");
+  }
+  texture::GroupingOptions grouping = options.grouping;
+  grouping.correction = correction;
+  Mesh mesh = ReadMesh(mesh_path, {.read_uvs = false});
   result.views = static_cast<int>(views.size());
   result.faces = mesh.n_faces();
 
   Stopwatch watch;
-  result.grouping = texture::GroupFaces(mesh, views, options.grouping, progress);
+  result.grouping = texture::GroupFaces(mesh, views, grouping, progress);
   result.seconds_grouping = watch.ElapsedSeconds();
 
   watch = Stopwatch();
@@ -75,7 +85,7 @@ TextureSessionResult TextureSession(const std::filesystem::path& session_folder,
 
   watch = Stopwatch();
   texture::TransferOptions transfer = options.transfer;
-  transfer.correction = options.grouping.correction;
+  transfer.correction = correction;
   const texture::TextureMap map =
       texture::TransferTexture(mesh, views, result.grouping, result.size, transfer, progress);
   result.filled_faces = map.filled_faces;
@@ -114,10 +124,11 @@ TextureSessionResult TextureSession(const std::filesystem::path& session_folder,
   report.faces = result.faces;
   report.views = result.views;
   report.excluded_views = options.grouping.exclude_views;
+  report.warnings = result.warnings;
   report.charts = result.charts;
   report.atlas_size = result.size;
   report.blend = options.transfer.blend;
-  report.correction = options.grouping.correction;
+  report.correction = correction;
   report.gain = options.transfer.gain;
   report.packing = texture::PackingModeName(options.atlas.packing.mode);
   report.held_out = result.held_out;

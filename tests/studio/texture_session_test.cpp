@@ -8,6 +8,8 @@
 
 #include <cstdio>
 
+#include <nlohmann/json.hpp>
+
 #include "carousel/core/error.h"
 #include "carousel/core/image_io.h"
 #include "carousel/core/mesh_io.h"
@@ -164,6 +166,45 @@ TEST_F(TextureSessionTest, CorrectionRemovesTheBackgroundATooLargeMeshPicksUp) {
   // Everything the too-large mesh brought in is gone.
   EXPECT_EQ(baseline, 0);
   EXPECT_EQ(after, 0);
+}
+
+// A dataset imported with its own mesh and no masks (COLMAP, Middlebury without --masks):
+// the correction, which needs each photo's silhouette, is skipped with a warning, and held-out
+// views are scored over the model's own silhouette.
+TEST_F(TextureSessionTest, WithoutMasksTheCorrectionIsSkippedWithAWarning) {
+  const auto folder = Copy("no_masks");
+  Session s = ReadSession(folder);
+  for (SessionView& v : s.views) v.mask.clear();
+  s.ground_truth.masks.clear();
+  WriteSessionManifest(folder, s);
+  std::filesystem::remove_all(folder / "masks");
+  Progress progress;
+  const TextureSessionResult r = TextureSession(folder, HeldOut(), progress);
+  ASSERT_EQ(r.warnings.size(), 1u);
+  EXPECT_THAT(
+      r.warnings[0],
+      ::testing::HasSubstr("24 of 24 views have no mask (the first: " + s.views[0].image + ")"));
+  EXPECT_THAT(r.warnings[0], ::testing::HasSubstr("correction is skipped"));
+  EXPECT_EQ(r.grouping.corrected_faces, 0);
+  EXPECT_EQ(r.corrected_texels, 0);
+  ASSERT_EQ(r.held_out.size(), 2u);
+  std::printf("held out without masks: PSNR %.2f dB, SSIM %.4f\n", r.mean_psnr_db, r.mean_ssim);
+  for (const HeldOutScore& h : r.held_out) EXPECT_FALSE(h.has_reference);
+  // As with masks (21.5-22 dB at this size), over a slightly different area.
+  EXPECT_GT(r.mean_psnr_db, 20.0);
+  EXPECT_GT(r.mean_ssim, 0.75);
+  const nlohmann::json report =
+      nlohmann::json::parse(testing::ReadBytes(folder / "model/report.json"));
+  EXPECT_EQ(report["options"]["correction"], false);
+  ASSERT_EQ(report["warnings"].size(), 1u);
+  EXPECT_TRUE(report["held_out"]["views"][0]["silhouette_iou"].is_null());
+  EXPECT_EQ(ReadSession(folder).stages.at("texture"), "done");
+
+  // Asked for no correction, nothing to warn about; with masks, no warning either.
+  TextureSessionOptions off = HeldOut();
+  off.grouping.correction = false;
+  EXPECT_TRUE(TextureSession(folder, off, progress).warnings.empty());
+  EXPECT_TRUE(TextureSession(Copy("with_masks"), {}, progress).warnings.empty());
 }
 
 TEST_F(TextureSessionTest, BadInputIsNamed) {

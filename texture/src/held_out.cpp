@@ -217,16 +217,17 @@ HeldOutScore CompareWithPhoto(const ModelRendering& rendering, const cv::Mat& ph
       "CompareWithPhoto: the photo is " << photo.cols << "x" << photo.rows
                                         << " (8-bit BGR expected) but the rendering "
                                         << rendering.image.cols << "x" << rendering.image.rows);
-  CAROUSEL_THROW_IF(
-      reference_mask.type() != CV_8UC1 || reference_mask.size() != rendering.image.size(),
-      InvalidArgument,
-      "CompareWithPhoto: the reference mask is "
-          << reference_mask.cols << "x" << reference_mask.rows
-          << " (8-bit expected) but the rendering " << rendering.image.cols << "x"
-          << rendering.image.rows);
+  CAROUSEL_THROW_IF(!reference_mask.empty() && (reference_mask.type() != CV_8UC1 ||
+                                                reference_mask.size() != rendering.image.size()),
+                    InvalidArgument,
+                    "CompareWithPhoto: the reference mask is "
+                        << reference_mask.cols << "x" << reference_mask.rows
+                        << " (8-bit expected) but the rendering " << rendering.image.cols << "x"
+                        << rendering.image.rows);
   HeldOutScore score;
   score.view = view;
-  const cv::Mat mask = reference_mask >= 128;
+  score.has_reference = !reference_mask.empty();
+  const cv::Mat mask = (score.has_reference ? reference_mask : rendering.mask) >= 128;
   cv::Mat diff;
   cv::absdiff(rendering.image, photo, diff);
   diff.convertTo(diff, CV_64F);

@@ -109,13 +109,15 @@ nlohmann::json QualityReportJson(const QualityReport& r) {
   report["view_gains_bgr"] = gains;
   report["options"] = {
       {"blend", r.blend}, {"correction", r.correction}, {"gain", r.gain}, {"packing", r.packing}};
+  report["warnings"] = r.warnings;
   if (!r.held_out.empty()) {
     nlohmann::json scores = nlohmann::json::array();
     for (const HeldOutScore& h : r.held_out)
       scores.push_back({{"view", h.view},
                         {"psnr_db", h.psnr_db},
                         {"ssim", h.ssim},
-                        {"silhouette_iou", h.mask_agreement}});
+                        {"silhouette_iou", h.has_reference ? nlohmann::json(h.mask_agreement)
+                                                           : nlohmann::json(nullptr)}});
     report["held_out"] = {{"views", scores},
                           {"mean_psnr_db", MeanPsnrDb(r.held_out)},
                           {"mean_ssim", MeanSsim(r.held_out)}};

@@ -57,6 +57,8 @@ struct TextureSessionResult {
   texture::ExportResult files;
   std::vector<HeldOutScore> held_out;  // one per excluded view
   double mean_psnr_db = 0.0, mean_ssim = 0.0;
+  // What could not be done as asked (the correction skipped: views without a mask).
+  std::vector<std::string> warnings;
   double seconds_grouping = 0.0, seconds_atlas = 0.0, seconds_transfer = 0.0, seconds_export = 0.0,
          seconds_evaluation = 0.0, seconds_total = 0.0;
 };

@@ -62,10 +62,13 @@ struct HeldOutScore {
   double psnr_db = 0.0;         // over the reference mask
   double ssim = 0.0;            // mean of the per-channel SSIM map over the mask
   double mask_agreement = 0.0;  // IoU of the rendered and the reference silhouettes
+  bool has_reference = true;    // false: no mask, scored over the rendering's own coverage
 };
 
 // Scores a rendering against `photo` (CV_8UC3 BGR) over `reference_mask` (CV_8UC1, >= 128 =
-// object), all of one size; `view` is copied into the score.
+// object), all of one size; `view` is copied into the score. An empty `reference_mask` (a view
+// without a mask) scores over the rendering's own coverage: mask_agreement is then 1 and
+// has_reference false.
 // \throw InvalidArgument for sizes or types that disagree.
 HeldOutScore CompareWithPhoto(const ModelRendering& rendering, const cv::Mat& photo,
                               const cv::Mat& reference_mask, int view);

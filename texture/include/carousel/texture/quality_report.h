@@ -70,6 +70,8 @@ struct QualityReport {
   bool correction = true;
   bool gain = true;
   std::string packing;  // PackingModeName()
+  // What the stage could not do as asked (a correction skipped for want of masks).
+  std::vector<std::string> warnings;
   // One per held-out view; none when no view was held out.
   std::vector<HeldOutScore> held_out;
   struct Seconds {
