@@ -29,11 +29,12 @@ struct CalibrateArgs {
 
 int RunIntrinsics(CalibrateArgs& args, Io& io) {
   const calib::BoardSpec board = calib::BoardSpec::Parse(args.board);
+  calib::CheckIntrinsicsPath(args.out);
   CreateParentFolder(args.out);
   CliProgress cli(io.err);
   const calib::IntrinsicsResult r =
       calib::CalibrateIntrinsics(args.images, board, args.intrinsics, cli.progress());
-  calib::WriteOpenCvIntrinsics(args.out, r, board);
+  calib::WriteIntrinsics(args.out, r, board);
   for (const calib::ViewReport& v : r.views) {
     io.out << "  " << v.name << ": "
            << (v.used ? "used, " + std::to_string(v.corners) + " corners" : "refused: " + v.reason);
@@ -46,7 +47,14 @@ int RunIntrinsics(CalibrateArgs& args, Io& io) {
          << c.fx << " fy " << c.fy << " cx " << c.cx << " cy " << c.cy << ", distortion "
          << std::setprecision(5) << c.distortion.k1 << " " << c.distortion.k2 << " "
          << c.distortion.p1 << " " << c.distortion.p2 << " " << c.distortion.k3 << "; "
-         << std::setprecision(0) << 100.0 * r.cell_coverage << " % of the image covered\n";
+         << std::setprecision(0) << 100.0 * r.cell_coverage << " % of the image covered\n"
+         << std::setprecision(2) << "  one standard deviation: fx " << r.std_fx << " fy "
+         << r.std_fy << " cx " << r.std_cx << " cy " << r.std_cy << " px";
+  if (!r.held.empty()) {
+    io.out << "; held at 0:";
+    for (const std::string& term : r.held) io.out << " " << term;
+  }
+  io.out << "\n";
   for (const std::string& w : r.warnings) io.out << "  warning: " << w << "\n";
   return kExitOk;
 }
@@ -88,7 +96,11 @@ void AddCalibrateCommands(CLI::App& command, Dispatch& dispatch) {
       "intrinsics", "one camera's intrinsics and lens distortion from photos of a board");
   intrinsics->add_option("images", args->images, "photos of the board")->required();
   intrinsics->add_option("--board", args->board, board_help)->required();
-  intrinsics->add_option("--out", args->out, "OpenCV YAML to write")->required();
+  intrinsics
+      ->add_option("--out", args->out,
+                   "file to write: .json (the camera as session.json has it, with the standard "
+                   "deviations and every photo's report) or .yml/.yaml/.xml (OpenCV's)")
+      ->required();
   AddOptionFlags(intrinsics, args->intrinsics, calib::IntrinsicsOptions::Fields());
   dispatch.On(intrinsics, [args](Io& io) { return RunIntrinsics(*args, io); });
 
@@ -103,7 +115,8 @@ void AddCalibrateCommands(CLI::App& command, Dispatch& dispatch) {
   rig->add_option("--stops-per-placement", args->rig.stops_per_placement,
                   "stops per board placement (default: the session's plan)");
   rig->add_option("--intrinsics", args->rig.intrinsics,
-                  "per camera, OpenCV YAML intrinsics calibrated beforehand (empty: none)")
+                  "per camera, intrinsics calibrated beforehand (.json from `calibrate "
+                  "intrinsics`, or OpenCV YAML/XML; empty: none)")
       ->delimiter(',');
   AddOptionFlags(rig, args->rig.rig, calib::RigCalibrationOptions::Fields());
   dispatch.On(rig, [args](Io& io) { return RunRig(*args, io); });

@@ -38,6 +38,9 @@ ViewsCalibration CalibrateViews(const std::vector<BoardView>& views, const cv::S
   c.rms = cv::calibrateCamera(
       object_points, image_points, size, c.k, c.d, rvecs, tvecs, std_intrinsics, std_extrinsics,
       errors, flags, cv::TermCriteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 100, 1e-12));
+  for (std::size_t i = 0; i < c.std_px.size(); ++i) {
+    c.std_px[i] = std_intrinsics.at<double>(static_cast<int>(i));
+  }
   c.per_view_rms.resize(views.size());
   for (std::size_t i = 0; i < views.size(); ++i) {
     c.per_view_rms[i] = errors.at<double>(static_cast<int>(i));

@@ -2,6 +2,7 @@
 // such views, and small formatting helpers shared by the calibration stages.
 #pragma once
 
+#include <array>
 #include <string>
 #include <vector>
 
@@ -26,6 +27,9 @@ struct ViewsCalibration {
   double rms = 0.0;
   std::vector<double> per_view_rms;
   std::vector<cv::Vec3d> rvecs, tvecs;  // cam_from_board per view (OpenCV's rvec/tvec)
+  // One standard deviation of fx, fy, cx, cy (px), from the Jacobian at the solution
+  // (OpenCV's stdDeviationsIntrinsics); 0 for a held parameter.
+  std::array<double, 4> std_px{};
 };
 // cv::calibrateCamera over the views (planar boards; OpenCV's flags).
 ViewsCalibration CalibrateViews(const std::vector<BoardView>& views, const cv::Size& size,

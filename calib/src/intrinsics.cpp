@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <array>
+#include <cctype>
 #include <cmath>
+#include <initializer_list>
 #include <sstream>
 
 #include <opencv2/calib3d.hpp>
@@ -12,6 +14,7 @@
 #include "carousel/core/error.h"
 #include "carousel/core/file_util.h"
 #include "carousel/core/image_io.h"
+#include "carousel/core/json.h"
 
 namespace carousel::calib {
 namespace {
@@ -31,6 +34,16 @@ const OptionTable<IntrinsicsOptions>& IntrinsicsOptions::Fields() {
     OptionTable<O> t;
     t.Add(&O::fix_aspect_ratio, {.name = "fix-aspect", .help = "fx = fy (square pixels)"});
     t.Add(&O::fix_k3, {.name = "fix-k3", .help = "k3 = 0 (narrow lenses)"});
+    t.Add(&O::hold_weak_terms,
+          {.name = "hold-weak-terms",
+           .help = "with fewer than 10 views hold k3 = 0 (and k2 = 0 when the corners stay "
+                   "near the image centre)"});
+    t.Add(&O::weak_fraction, {.name = "weak-fraction",
+                              .help = "warn when the standard deviation of fx, fy (of cx, cy) "
+                                      "exceeds this fraction of it (of the image side)",
+                              .min = 0.0,
+                              .min_exclusive = true,
+                              .advanced = true});
     t.Add(&O::zero_tangential, {.name = "zero-tangential", .help = "p1 = p2 = 0"});
     t.Add(&O::min_views,
           {.name = "min-views", .help = "usable photos needed", .min = 1, .advanced = true});
@@ -61,21 +74,44 @@ struct UsableView {
   BoardView view;
 };
 
-double RunCalibration(const std::vector<UsableView>& usable, const cv::Size& size,
-                      const IntrinsicsOptions& options, cv::Mat& k, cv::Mat& d,
-                      std::vector<double>& per_view) {
+// The farthest corner's distance from the image centre, over half the image diagonal.
+double CornerReach(const std::vector<UsableView>& usable, const cv::Size& size) {
+  const cv::Point2d centre(0.5 * (size.width - 1), 0.5 * (size.height - 1));
+  const double half_diagonal = 0.5 * std::hypot(size.width, size.height);
+  double reach = 0.0;
+  for (const UsableView& v : usable) {
+    for (const cv::Point2f& p : v.view.image) {
+      reach = std::max(reach, cv::norm(cv::Point2d(p) - centre) / half_diagonal);
+    }
+  }
+  return reach;
+}
+
+// OpenCV's calibration with the lens terms the options and the views allow; `held` names the
+// terms held at zero.
+ViewsCalibration RunCalibration(const std::vector<UsableView>& usable, const cv::Size& size,
+                                const IntrinsicsOptions& options, std::vector<std::string>* held) {
   std::vector<BoardView> views;
   views.reserve(usable.size());
   for (const UsableView& v : usable) views.push_back(v.view);
+  held->clear();
   int flags = 0;
   if (options.fix_aspect_ratio) flags |= cv::CALIB_FIX_ASPECT_RATIO;
-  if (options.zero_tangential) flags |= cv::CALIB_ZERO_TANGENT_DIST;
-  if (options.fix_k3) flags |= cv::CALIB_FIX_K3;
-  const ViewsCalibration c = CalibrateViews(views, size, flags);
-  k = c.k;
-  d = c.d;
-  per_view = c.per_view_rms;
-  return c.rms;
+  const bool few =
+      options.hold_weak_terms && static_cast<int>(usable.size()) < IntrinsicsOptions::kFewViews;
+  if (few && CornerReach(usable, size) < IntrinsicsOptions::kNearCentreReach) {
+    flags |= cv::CALIB_FIX_K2;
+    held->emplace_back("k2");
+  }
+  if (options.fix_k3 || few) {
+    flags |= cv::CALIB_FIX_K3;
+    held->emplace_back("k3");
+  }
+  if (options.zero_tangential) {
+    flags |= cv::CALIB_ZERO_TANGENT_DIST;
+    held->emplace_back("p1 p2");
+  }
+  return CalibrateViews(views, size, flags);
 }
 
 }  // namespace
@@ -128,13 +164,11 @@ IntrinsicsResult CalibrateIntrinsics(const std::vector<NamedImage>& images, cons
   }
 
   progress.BeginStage("calibrate");
-  cv::Mat k;
-  cv::Mat d;
-  std::vector<double> per_view;
-  double rms = RunCalibration(usable, size, options, k, d, per_view);
+  ViewsCalibration c = RunCalibration(usable, size, options, &result.held);
   // Reject reprojection outliers (a board that moved during the exposure, a wrong corner
   // order) and calibrate again, a few rounds at most.
   for (int round = 0; round < 3 && options.outlier_factor > 0; ++round) {
+    const std::vector<double>& per_view = c.per_view_rms;
     const double limit =
         std::max(options.outlier_factor * Median(per_view), options.outlier_floor_px);
     std::vector<UsableView> kept;
@@ -153,18 +187,26 @@ IntrinsicsResult CalibrateIntrinsics(const std::vector<NamedImage>& images, cons
     if (static_cast<int>(usable.size()) < options.min_views) {
       fail("cannot calibrate: too few views remain after rejecting reprojection outliers");
     }
-    rms = RunCalibration(usable, size, options, k, d, per_view);
+    c = RunCalibration(usable, size, options, &result.held);
   }
   progress.Report(1.0);
 
   for (std::size_t i = 0; i < usable.size(); ++i) {
     ViewReport& report = result.views[usable[i].report];
     report.used = true;
-    report.rms_px = per_view[i];
+    report.rms_px = c.per_view_rms[i];
   }
-  result.rms_px = rms;
-  result.camera = internal::CameraFromCv(k, d, size);
+  result.rms_px = c.rms;
+  result.camera = internal::CameraFromCv(c.k, c.d, size);
   result.camera.Validate();
+  result.corner_reach = CornerReach(usable, size);
+  result.std_fx = c.std_px[0];
+  result.std_fy = c.std_px[1];
+  result.std_cx = c.std_px[2];
+  result.std_cy = c.std_px[3];
+  const double w = options.weak_fraction;
+  result.weak = result.std_fx > w * result.camera.fx || result.std_fy > w * result.camera.fy ||
+                result.std_cx > w * size.width || result.std_cy > w * size.height;
 
   // Coverage of the image by the used corners, 3 x 3 cells.
   std::array<bool, 9> seen{};
@@ -183,9 +225,19 @@ IntrinsicsResult CalibrateIntrinsics(const std::vector<NamedImage>& images, cons
         "the board was never seen in every corner of the image: the lens distortion there is "
         "extrapolated (add photos with the board near each image corner)");
   }
-  if (result.UsedViews() < 10) {
+  if (result.UsedViews() < IntrinsicsOptions::kFewViews) {
     result.warnings.push_back("only " + std::to_string(result.UsedViews()) +
                               " usable views: 10 to 20 at varied tilts constrain the lens better");
+  }
+  if (result.weak) {
+    const auto percent = [](double part, double whole) { return Fixed(100.0 * part / whole, 1); };
+    result.warnings.push_back(
+        "a weak calibration: one standard deviation of fx " + Fixed(result.std_fx, 2) + " px (" +
+        percent(result.std_fx, result.camera.fx) + " %), fy " + Fixed(result.std_fy, 2) + " px (" +
+        percent(result.std_fy, result.camera.fy) + " %), cx " + Fixed(result.std_cx, 2) + " px (" +
+        percent(result.std_cx, size.width) + " % of the width), cy " + Fixed(result.std_cy, 2) +
+        " px (" + percent(result.std_cy, size.height) +
+        " % of the height); add photos with the board tilted and filling the image");
   }
   return result;
 }
@@ -227,6 +279,68 @@ IntrinsicsResult CalibrateIntrinsics(const std::vector<std::filesystem::path>& i
   return result;
 }
 
+// ---- files ----
+
+namespace {
+
+bool HasExtension(const std::filesystem::path& path, std::initializer_list<const char*> any) {
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });
+  return std::any_of(any.begin(), any.end(), [&](const char* e) { return ext == e; });
+}
+
+}  // namespace
+
+void CheckIntrinsicsPath(const std::filesystem::path& path) {
+  CAROUSEL_THROW_IF(!HasExtension(path, {".json", ".yml", ".yaml", ".xml"}), InvalidArgument,
+                    "cannot tell the format of " << path.string()
+                                                 << ": name it .json (the camera as session.json "
+                                                    "has it) or .yml, .yaml, .xml (OpenCV's)");
+}
+
+void WriteIntrinsics(const std::filesystem::path& path, const IntrinsicsResult& result,
+                     const BoardSpec& board) {
+  CheckIntrinsicsPath(path);
+  if (!HasExtension(path, {".json"})) {
+    WriteOpenCvIntrinsics(path, result, board);
+    return;
+  }
+  nlohmann::json views = nlohmann::json::array();
+  for (const ViewReport& v : result.views) {
+    nlohmann::json view = {{"name", v.name}, {"used", v.used}};
+    if (v.used) {
+      view["corners"] = v.corners;
+      view["rms_px"] = v.rms_px;
+    } else {
+      view["reason"] = v.reason;
+    }
+    views.push_back(view);
+  }
+  const nlohmann::json out = {{"camera", CameraModelToJson(result.camera, "")},
+                              {"rms_px", result.rms_px},
+                              {"std_px",
+                               {{"fx", result.std_fx},
+                                {"fy", result.std_fy},
+                                {"cx", result.std_cx},
+                                {"cy", result.std_cy}}},
+                              {"held", result.held},
+                              {"weak", result.weak},
+                              {"cell_coverage", result.cell_coverage},
+                              {"corner_reach", result.corner_reach},
+                              {"board", board.ToString()},
+                              {"views", views},
+                              {"warnings", result.warnings}};
+  WriteFileAtomic(path, out.dump(2) + "\n");
+}
+
+CameraModel ReadIntrinsics(const std::filesystem::path& path) {
+  if (!HasExtension(path, {".json"})) return ReadOpenCvIntrinsics(path);
+  const nlohmann::json file = ParseJsonFile(path);
+  const JsonReader read(file, path);
+  return CameraModelFromJson(read.Object("camera"), "");
+}
+
 // ---- OpenCV YAML ----
 
 namespace {
@@ -243,16 +357,19 @@ void WriteCamera(cv::FileStorage& fs, const CameraModel& c, double rms_px) {
   fs << "avg_reprojection_error" << rms_px;
 }
 
-cv::FileStorage MemoryYaml() {
-  return cv::FileStorage(
-      ".yml", cv::FileStorage::WRITE | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
+// YAML, or XML for a .xml path.
+cv::FileStorage MemoryStorage(const std::filesystem::path& path) {
+  const bool xml = HasExtension(path, {".xml"});
+  return cv::FileStorage(xml ? ".xml" : ".yml",
+                         cv::FileStorage::WRITE | cv::FileStorage::MEMORY |
+                             (xml ? cv::FileStorage::FORMAT_XML : cv::FileStorage::FORMAT_YAML));
 }
 
 }  // namespace
 
 void WriteOpenCvIntrinsics(const std::filesystem::path& path, const IntrinsicsResult& result,
                            const BoardSpec& board) {
-  cv::FileStorage fs = MemoryYaml();
+  cv::FileStorage fs = MemoryStorage(path);
   fs << "nframes" << result.UsedViews();
   fs << "board_width" << board.cols;
   fs << "board_height" << board.rows;
@@ -263,12 +380,18 @@ void WriteOpenCvIntrinsics(const std::filesystem::path& path, const IntrinsicsRe
     if (v.used) per_view.push_back(v.rms_px);
   }
   fs << "per_view_reprojection_errors" << cv::Mat(per_view, true);
+  // Beyond OpenCV's sample: one standard deviation of fx fy cx cy, and the terms held at 0.
+  fs << "intrinsics_std_px"
+     << (cv::Mat_<double>(4, 1) << result.std_fx, result.std_fy, result.std_cx, result.std_cy);
+  std::string held;
+  for (const std::string& term : result.held) held += (held.empty() ? "" : " ") + term;
+  fs << "held_terms" << held;
   WriteFileAtomic(path, fs.releaseAndGetString());
 }
 
 void WriteOpenCvIntrinsics(const std::filesystem::path& path, const CameraModel& camera,
                            double rms_px) {
-  cv::FileStorage fs = MemoryYaml();
+  cv::FileStorage fs = MemoryStorage(path);
   WriteCamera(fs, camera, rms_px);
   WriteFileAtomic(path, fs.releaseAndGetString());
 }

@@ -332,7 +332,7 @@ json CameraModelToJson(const CameraModel& camera, std::string_view pose_key) {
             {"cx", camera.cx},
             {"cy", camera.cy},
             {"distortion", {d.k1, d.k2, d.p1, d.p2, d.k3}}};
-  j[std::string(pose_key)] = Rigid3dToJson(camera.cam_from_world);
+  if (!pose_key.empty()) j[std::string(pose_key)] = Rigid3dToJson(camera.cam_from_world);
   return j;
 }
 
@@ -346,7 +346,7 @@ CameraModel CameraModelFromJson(const JsonReader& object, std::string_view pose_
   camera.cy = object.Number("cy");
   const std::vector<double> d = object.Numbers("distortion", 5);
   camera.distortion = {d[0], d[1], d[2], d[3], d[4]};
-  camera.cam_from_world = Rigid3dFromJson(object.Object(pose_key));
+  if (!pose_key.empty()) camera.cam_from_world = Rigid3dFromJson(object.Object(pose_key));
   try {
     camera.Validate();
   } catch (const InvalidArgument& e) {

@@ -143,7 +143,7 @@ CalibrateSessionResult CalibrateSession(const std::filesystem::path& folder,
     if (file.empty()) {
       intrinsics.emplace_back();
     } else {
-      intrinsics.emplace_back(calib::ReadOpenCvIntrinsics(file));
+      intrinsics.emplace_back(calib::ReadIntrinsics(file));
     }
   }
   CalibrateSessionResult result;

@@ -127,6 +127,22 @@ TEST(CalibrationRunTest, IntrinsicsAndBoardCommands) {
   const CameraModel ours = calib::ReadOpenCvIntrinsics(dir / "left.yml");
   EXPECT_NEAR(ours.fx / published.fx, 1.0, 0.01);
   EXPECT_NEAR(ours.cy / published.cy, 1.0, 0.01);
+  EXPECT_THAT(r.out, HasSubstr("one standard deviation: fx "));
+  // Four of them, as JSON: k3 held, and the file a rig calibration takes as its start.
+  std::vector<std::string> four(args.begin(), args.begin() + 6);
+  four.insert(four.end(),
+              {"--board", "chessboard:9x6:0.025", "--out", (dir / "left4.json").string()});
+  r = Carousel(four);
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_THAT(r.out, HasSubstr("4 of 4 photos"));
+  EXPECT_THAT(r.out, HasSubstr("; held at 0: k3"));
+  EXPECT_NEAR(calib::ReadIntrinsics(dir / "left4.json").fx / published.fx, 1.0, 0.01);
+  // An extension that names no format is refused before any photo is looked at.
+  four.back() = (dir / "left4.txt").string();
+  r = Carousel(four);
+  EXPECT_EQ(r.code, kExitUsage);
+  EXPECT_THAT(r.out, HasSubstr("left4.txt: name it .json"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "left4.txt"));
   // A board image to print.
   r = Carousel({"calibrate", "board", "--board", "charuco:9x7:0.04:0.03:DICT_6X6_250", "--out",
                 (dir / "board.png").string(), "--px-per-square", "100"});

@@ -5,10 +5,13 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+#include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "carousel/core/error.h"
+#include "carousel/core/file_util.h"
 #include "carousel/sim/renderer.h"
 #include "carousel/sim/test_scenes.h"
 #include "carousel/testing/testing.h"
@@ -202,6 +205,166 @@ TEST(IntrinsicsTest, OpenCvSamplePhotosMatchThePublishedIntrinsics) {
   EXPECT_DOUBLE_EQ(back.distortion.k2, r.camera.distortion.k2);
   cv::FileStorage fs(yml.string(), cv::FileStorage::READ);
   EXPECT_EQ(static_cast<int>(fs["nframes"]), r.UsedViews());
+}
+
+// OpenCV's calibrateCamera with its default model (k1 k2 p1 p2 k3 free) on our detections.
+CameraModel OpenCvOnTheSameDetections(const std::vector<std::filesystem::path>& images,
+                                      const BoardSpec& board) {
+  std::vector<std::vector<cv::Point3f>> object;
+  std::vector<std::vector<cv::Point2f>> image;
+  cv::Size size;
+  for (const auto& path : images) {
+    const cv::Mat gray = cv::imread(path.string(), cv::IMREAD_GRAYSCALE);
+    size = gray.size();
+    const BoardDetection d = DetectBoard(gray, board);
+    if (!d.found) continue;
+    const std::vector<cv::Point3f> all = board.ObjectPoints();
+    object.emplace_back();
+    for (const int id : d.ids) object.back().push_back(all[static_cast<std::size_t>(id)]);
+    image.push_back(d.corners);
+  }
+  cv::Mat k;
+  cv::Mat dist;
+  std::vector<cv::Mat> rvecs;
+  std::vector<cv::Mat> tvecs;
+  cv::calibrateCamera(object, image, size, k, dist, rvecs, tvecs);
+  CameraModel c;
+  c.fx = k.at<double>(0, 0);
+  c.fy = k.at<double>(1, 1);
+  c.cx = k.at<double>(0, 2);
+  c.cy = k.at<double>(1, 2);
+  return c;
+}
+
+// Few real photos: 4-view subsets of OpenCV's sample photos hold k3 (and only k3: the boards
+// reach out to the image corners) and agree with OpenCV's own calibration of the same
+// detections within 0.5 %; the standard deviations shrink with more views, and a two-view
+// calibration whose focal length is off is flagged weak.
+TEST(IntrinsicsTest, FewRealPhotosHoldK3AgreeWithOpenCvAndReportTheirUncertainty) {
+  const BoardSpec board = BoardSpec::Parse("chessboard:9x6:0.025");
+  const std::vector<std::filesystem::path> all = OpenCvLeftImages();
+  Progress progress;
+  const IntrinsicsResult whole = CalibrateIntrinsics(all, board, IntrinsicsOptions{}, progress);
+  EXPECT_TRUE(whole.held.empty());
+  EXPECT_FALSE(whole.weak);
+  const CameraModel cv_whole = OpenCvOnTheSameDetections(all, board);
+  const auto agree = [](const CameraModel& ours, const CameraModel& theirs,
+                        const std::string& what) {
+    EXPECT_NEAR(ours.fx / theirs.fx, 1.0, 0.005) << what;
+    EXPECT_NEAR(ours.fy / theirs.fy, 1.0, 0.005) << what;
+    EXPECT_NEAR(ours.cx / theirs.cx, 1.0, 0.005) << what;
+    EXPECT_NEAR(ours.cy / theirs.cy, 1.0, 0.005) << what;
+  };
+  agree(whole.camera, cv_whole, "13 views");
+  std::printf(
+      "13 views: fx %.2f fy %.2f cx %.2f cy %.2f (sd %.2f %.2f %.2f %.2f) OpenCV %.2f "
+      "%.2f %.2f %.2f\n",
+      whole.camera.fx, whole.camera.fy, whole.camera.cx, whole.camera.cy, whole.std_fx,
+      whole.std_fy, whole.std_cx, whole.std_cy, cv_whole.fx, cv_whole.fy, cv_whole.cx, cv_whole.cy);
+  IntrinsicsOptions few;
+  few.min_views = 2;
+  for (const std::size_t count : {4u, 2u}) {
+    for (std::size_t first = 0; first < all.size(); first += 4) {
+      std::vector<std::filesystem::path> subset;
+      for (std::size_t j = 0; j < count; ++j) subset.push_back(all[(first + j) % all.size()]);
+      const std::string what =
+          std::to_string(count) + " views from " + subset[0].filename().string();
+      const IntrinsicsResult r = CalibrateIntrinsics(subset, board, few, progress);
+      ASSERT_EQ(r.UsedViews(), static_cast<int>(count)) << what;
+      EXPECT_EQ(r.held, std::vector<std::string>{"k3"}) << what;
+      EXPECT_GT(r.corner_reach, IntrinsicsOptions::kNearCentreReach) << what;
+      const CameraModel cv = OpenCvOnTheSameDetections(subset, board);
+      const double fx_off = std::abs(r.camera.fx / whole.camera.fx - 1.0);
+      std::printf(
+          "%s: fx %.2f fy %.2f cx %.2f cy %.2f (sd %.2f %.2f %.2f %.2f)%s; OpenCV %.2f "
+          "%.2f %.2f %.2f; fx %.2f %% off the 13 views'\n",
+          what.c_str(), r.camera.fx, r.camera.fy, r.camera.cx, r.camera.cy, r.std_fx, r.std_fy,
+          r.std_cx, r.std_cy, r.weak ? " weak" : "", cv.fx, cv.fy, cv.cx, cv.cy, 100.0 * fx_off);
+      // More views, smaller standard deviations.
+      EXPECT_GT(r.std_fx, whole.std_fx) << what;
+      EXPECT_GT(r.std_cx, whole.std_cx) << what;
+      if (count == 4) {
+        agree(r.camera, cv, what);
+        EXPECT_FALSE(r.weak) << what;
+      } else if (fx_off > 0.01) {
+        EXPECT_TRUE(r.weak) << what;
+        EXPECT_THAT(r.warnings.back(),
+                    HasSubstr("a weak calibration: one standard deviation of fx"))
+            << what;
+      }
+    }
+  }
+}
+
+// Boards that stay near the image centre leave k2 unconstrained: with few views it is held
+// too (and the option switches the holding off).
+TEST(IntrinsicsTest, BoardsNearTheCentreHoldK2AsWell) {
+  CameraModel truth;
+  truth.width = 800;
+  truth.height = 600;
+  truth.fx = truth.fy = 900.0;
+  truth.cx = 400.0;
+  truth.cy = 300.0;
+  truth.distortion.k1 = -0.12;
+  const BoardSpec board = BoardSpec::Parse("chessboard:9x6:0.03");
+  const double tilts[][3] = {{25, 0, 0}, {-25, 10, 5}, {0, 30, -8}, {15, -25, 12}};
+  std::vector<NamedImage> images;
+  for (int i = 0; i < 4; ++i) {
+    const Rigid3d pose =
+        BoardPose(tilts[i][0], tilts[i][1], tilts[i][2], Eigen::Vector3d(-0.12, -0.075, 1.3));
+    images.push_back({"view" + std::to_string(i), PhotographBoard(truth, board, pose, i)});
+  }
+  Progress progress;
+  const IntrinsicsResult r = CalibrateIntrinsics(images, board, IntrinsicsOptions{}, progress);
+  std::printf("boards near the centre: reach %.2f, fx %.1f (sd %.1f)%s\n", r.corner_reach,
+              r.camera.fx, r.std_fx, r.weak ? " weak" : "");
+  EXPECT_EQ(r.UsedViews(), 4);
+  EXPECT_LT(r.corner_reach, IntrinsicsOptions::kNearCentreReach);
+  EXPECT_EQ(r.held, (std::vector<std::string>{"k2", "k3"}));
+  EXPECT_EQ(r.camera.distortion.k2, 0.0);
+  EXPECT_EQ(r.camera.distortion.k3, 0.0);
+  IntrinsicsOptions free;
+  free.hold_weak_terms = false;
+  const IntrinsicsResult f = CalibrateIntrinsics(images, board, free, progress);
+  EXPECT_TRUE(f.held.empty());
+  EXPECT_NE(f.camera.distortion.k2, 0.0);
+}
+
+// --out by extension: .json is ours (read back bit for bit), .yml/.xml OpenCV's, anything else
+// is refused before calibrating.
+TEST(IntrinsicsTest, TheFileFormatFollowsTheExtension) {
+  const BoardSpec board = BoardSpec::Parse("chessboard:9x6:0.025");
+  std::vector<std::filesystem::path> images = OpenCvLeftImages();
+  images.resize(5);
+  Progress progress;
+  const IntrinsicsResult r = CalibrateIntrinsics(images, board, IntrinsicsOptions{}, progress);
+  TempDir dir;
+  WriteIntrinsics(dir / "cam.json", r, board);
+  const nlohmann::json j = nlohmann::json::parse(carousel::testing::ReadBytes(dir / "cam.json"));
+  EXPECT_DOUBLE_EQ(j.at("std_px").at("fx").get<double>(), r.std_fx);
+  EXPECT_EQ(j.at("held"), nlohmann::json::array({"k3"}));
+  EXPECT_EQ(j.at("views").size(), 5u);
+  EXPECT_EQ(j.at("board"), board.ToString());
+  EXPECT_FALSE(j.at("camera").contains("cam_from_world"));
+  const CameraModel json_back = ReadIntrinsics(dir / "cam.json");
+  EXPECT_EQ(json_back.fx, r.camera.fx);
+  EXPECT_EQ(json_back.distortion.k1, r.camera.distortion.k1);
+  EXPECT_EQ(json_back.width, 640);
+  for (const char* name : {"cam.yml", "cam.xml"}) {
+    WriteIntrinsics(dir / name, r, board);
+    cv::FileStorage fs((dir / name).string(), cv::FileStorage::READ);
+    cv::Mat k;
+    fs["camera_matrix"] >> k;
+    EXPECT_DOUBLE_EQ(k.at<double>(0, 0), r.camera.fx) << name;
+    EXPECT_EQ(static_cast<std::string>(fs["held_terms"]), "k3") << name;
+    EXPECT_DOUBLE_EQ(ReadIntrinsics(dir / name).cy, r.camera.cy) << name;
+  }
+  CAROUSEL_EXPECT_THROW_WITH(WriteIntrinsics(dir / "cam.txt", r, board), InvalidArgument,
+                             "name it .json");
+  EXPECT_FALSE(std::filesystem::exists(dir / "cam.txt"));
+  // A broken JSON file is named.
+  WriteFileAtomic(dir / "bad.json", std::string("{\"camera\": {\"fx\": 1}}"));
+  CAROUSEL_EXPECT_THROW_WITH(ReadIntrinsics(dir / "bad.json"), FormatError, "bad.json");
 }
 
 TEST(IntrinsicsTest, BadPhotosAreRejectedWithTheirReason) {

@@ -2,12 +2,16 @@
 //
 //   BoardSpec board = BoardSpec::Parse("charuco:5x7:0.04:0.03:DICT_6X6_250");
 //   IntrinsicsResult r = CalibrateIntrinsics(image_paths, board, IntrinsicsOptions{}, progress);
-//   WriteOpenCvIntrinsics("left.yml", r);   // the YAML of OpenCV's calibration sample
+//   WriteIntrinsics("left.yml", r, board);   // the YAML of OpenCV's calibration sample
+//   WriteIntrinsics("left.json", r, board);  // or JSON: the camera as session.json has it
 //
 // Every photo is either used or rejected with a reason (unreadable, no board, too few corners,
 // board too small, blurred, reprojection outlier); the result says how well the views cover the
 // image, since a board never seen near the corners leaves the distortion there unconstrained.
-// Lens model: OpenCV's (k1, k2, p1, p2, k3), as CameraModel.
+// Lens model: OpenCV's (k1, k2, p1, p2, k3), as CameraModel. With few views the terms the
+// photos cannot constrain are held at zero (k3 below 10 views; k2 too when the corners stay
+// near the image centre), and the result gives each of fx, fy, cx, cy with its standard
+// deviation, warning when the calibration is weak.
 #pragma once
 
 #include <filesystem>
@@ -29,6 +33,15 @@ struct IntrinsicsOptions {
   bool fix_aspect_ratio = false;  // fx == fy (square pixels)
   bool zero_tangential = false;   // p1 = p2 = 0
   bool fix_k3 = false;            // k3 = 0 (narrow lenses; avoids over-fitting)
+  // Hold what few views cannot constrain: k3 = 0 with fewer than kFewViews usable views, and
+  // k2 = 0 as well when the corners reach less than kNearCentreReach of the way from the image
+  // centre to its corners.
+  bool hold_weak_terms = true;
+  static constexpr int kFewViews = 10;
+  static constexpr double kNearCentreReach = 0.5;
+  // Weak: a standard deviation of fx or fy above this fraction of it, or of cx or cy above
+  // this fraction of the image's width or height.
+  double weak_fraction = 0.01;
   // After a first calibration, a view whose reprojection RMS exceeds
   // max(outlier_factor * median view RMS, outlier_floor_px) is rejected and the calibration
   // repeated without it (a moved board, a wrong corner order). outlier_factor <= 0: never.
@@ -55,6 +68,14 @@ struct IntrinsicsResult {
   // detected corner, and whether all four corner cells do.
   double cell_coverage = 0.0;
   bool corners_covered = false;
+  // The farthest corner's distance from the image centre / half the image diagonal.
+  double corner_reach = 0.0;
+  // The lens terms held at zero, by the options or because the views cannot constrain them
+  // ("k3", "k2", "p1 p2").
+  std::vector<std::string> held;
+  // One standard deviation of fx, fy, cx, cy (px), from the Jacobian at the solution.
+  double std_fx = 0.0, std_fy = 0.0, std_cx = 0.0, std_cy = 0.0;
+  bool weak = false;  // a standard deviation beyond IntrinsicsOptions::weak_fraction
   std::vector<std::string> warnings;  // e.g. the image corners were never seen
   int UsedViews() const;
 };
@@ -76,8 +97,22 @@ IntrinsicsResult CalibrateIntrinsics(const std::vector<std::filesystem::path>& i
                                      const BoardSpec& board, const IntrinsicsOptions& options,
                                      Progress& progress);
 
+// By the extension of `path`: .json writes {"camera": CameraModelToJson without a pose,
+// "rms_px", "std_px": {fx, fy, cx, cy}, "held", "weak", "board", "views": [...], "warnings"};
+// .yml, .yaml and .xml write OpenCV's file (WriteOpenCvIntrinsics). Atomically.
+// \throw InvalidArgument for another extension.
+void WriteIntrinsics(const std::filesystem::path& path, const IntrinsicsResult& result,
+                     const BoardSpec& board);
+// The check WriteIntrinsics makes of the extension, to fail before calibrating.
+// \throw InvalidArgument.
+void CheckIntrinsicsPath(const std::filesystem::path& path);
+// The camera of a file WriteIntrinsics wrote (.json), or of OpenCV's YAML/XML (any other).
+// \throw FormatError naming the file and what is wrong.
+CameraModel ReadIntrinsics(const std::filesystem::path& path);
+
 // OpenCV's calibration YAML (image_width, image_height, camera_matrix,
-// distortion_coefficients, avg_reprojection_error, ...), written atomically.
+// distortion_coefficients, avg_reprojection_error, ...; XML for a .xml path), written
+// atomically.
 void WriteOpenCvIntrinsics(const std::filesystem::path& path, const IntrinsicsResult& result,
                            const BoardSpec& board);
 // A camera's intrinsics alone in the same YAML (image size, camera_matrix,

@@ -146,7 +146,8 @@ Rigid3d Rigid3dFromJson(const JsonReader& object);
 
 // A camera as session.json stores it: {"width", "height", "fx", "fy", "cx", "cy",
 // "distortion": [k1, k2, p1, p2, k3], "cam_from_world": Rigid3dToJson}; `pose_key` names the
-// pose field (the rig calibration file stores it as "cam_from_table"). Doubles are written in
+// pose field (the rig calibration file stores it as "cam_from_table"; empty: no pose, the
+// identity, for intrinsics alone). Doubles are written in
 // their shortest exact form, so reading back gives the same camera bit for bit.
 nlohmann::json CameraModelToJson(const CameraModel& camera,
                                  std::string_view pose_key = "cam_from_world");

@@ -43,7 +43,8 @@ struct CalibrateSessionOptions {
   std::string board;                            // empty: the session's plan's
   std::optional<double> board_origin_height_m;  // unset: the session's plan's
   int stops_per_placement = 0;                  // 0: the session's plan's (or one placement)
-  // Per camera index, optional: OpenCV YAML intrinsics calibrated beforehand (used as the
+  // Per camera index, optional: intrinsics calibrated beforehand (calib::ReadIntrinsics: .json
+  // or OpenCV YAML/XML; used as the
   // start, held fixed unless rig.refine_intrinsics).
   std::vector<std::filesystem::path> intrinsics;
   calib::RigCalibrationOptions rig;
