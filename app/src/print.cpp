@@ -39,7 +39,10 @@ void PrintTexture(const std::filesystem::path& session, const studio::TextureSes
       << "^2 texture from " << r.views << " views\n"
       << "grouping: " << r.grouping.corrected_faces << " faces moved off the background, "
       << r.grouping.uncorrectable_faces << " with background in every view, "
-      << r.grouping.island_faces_switched << " island faces switched, " << r.grouping.unseen_faces
+      << r.grouping.island_faces_switched << " island faces switched, "
+      << r.grouping.coherence_faces_switched << " for coherence (" << r.grouping.patches
+      << " patches of " << std::setprecision(1) << r.grouping.mean_patch_faces
+      << std::setprecision(2) << " faces on average), " << r.grouping.unseen_faces
       << " seen by no view (filled from neighbours)\n"
       << "texel density: " << std::setprecision(1) << 100.0 * r.dense_fraction
       << " % of faces get at least one texel per photo pixel; " << r.blended_texels

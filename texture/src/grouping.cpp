@@ -220,6 +220,87 @@ void CleanIslands(const std::vector<FaceData>& faces, int max_island_faces,
   }
 }
 
+// Iterated conditional modes on the front views: each face in turn takes, among its current
+// view and its neighbours' (usable, and at least min_ratio of its best cosine), the one with
+// the least data cost (1 - cosine / best cosine) plus seam_cost per neighbour left on
+// another view; sweeps until nothing changes (at most 20).
+void MakeFrontViewsCoherent(const ViewMeasures& m, const std::vector<FaceData>& faces,
+                            double seam_cost, double min_ratio, GroupingResult* result) {
+  const std::size_t nf = faces.size();
+  const int nv = result->views;
+  std::vector<float> best(nf, 0.0f);
+  std::vector<int> initial = result->front_view;
+  for (std::size_t f = 0; f < nf; ++f) {
+    const int v = result->front_view[f];
+    if (v >= 0 && result->usable[f * nv + v]) best[f] = m.cosine[f * nv + v];
+  }
+  for (int sweep = 0; sweep < 20; ++sweep) {
+    int changed = 0;
+    for (std::size_t f = 0; f < nf; ++f) {
+      if (best[f] <= 0.0f) continue;  // no usable view: the fallback choice stays
+      const int current = result->front_view[f];
+      std::array<int, 4> candidates{current, -1, -1, -1};
+      for (int k = 0; k < 3; ++k) {
+        const int g = faces[f].across[static_cast<std::size_t>(k)];
+        if (g >= 0) candidates[static_cast<std::size_t>(k) + 1] = result->front_view[g];
+      }
+      int chosen = current;
+      double chosen_cost = std::numeric_limits<double>::max();
+      for (const int v : candidates) {
+        if (v < 0) continue;
+        const std::size_t i = f * nv + v;
+        if (!result->usable[i] || m.cosine[i] < min_ratio * best[f]) continue;
+        double cost = 1.0 - m.cosine[i] / best[f];
+        for (const int g : faces[f].across) {
+          if (g >= 0 && result->front_view[g] >= 0 && result->front_view[g] != v) cost += seam_cost;
+        }
+        if (cost < chosen_cost - 1e-12) {
+          chosen_cost = cost;
+          chosen = v;
+        }
+      }
+      if (chosen != current) {
+        result->front_view[f] = chosen;
+        ++changed;
+      }
+    }
+    if (changed == 0) break;
+  }
+  for (std::size_t f = 0; f < nf; ++f) {
+    if (result->front_view[f] != initial[f]) ++result->coherence_faces_switched;
+  }
+}
+
+// Connected groups of faces with one front view, and their mean size.
+void CountPatches(const std::vector<FaceData>& faces, GroupingResult* result) {
+  const std::size_t nf = faces.size();
+  std::vector<unsigned char> visited(nf, 0);
+  std::vector<int> stack;
+  int patches = 0;
+  std::size_t faces_in_patches = 0;
+  for (std::size_t seed = 0; seed < nf; ++seed) {
+    if (visited[seed] || result->front_view[seed] < 0) continue;
+    const int view = result->front_view[seed];
+    ++patches;
+    visited[seed] = 1;
+    stack.assign(1, static_cast<int>(seed));
+    while (!stack.empty()) {
+      const int f = stack.back();
+      stack.pop_back();
+      ++faces_in_patches;
+      for (const int g : faces[static_cast<std::size_t>(f)].across) {
+        if (g >= 0 && !visited[g] && result->front_view[g] == view) {
+          visited[g] = 1;
+          stack.push_back(g);
+        }
+      }
+    }
+  }
+  result->patches = patches;
+  result->mean_patch_faces =
+      patches > 0 ? static_cast<double>(faces_in_patches) / static_cast<double>(patches) : 0.0;
+}
+
 }  // namespace
 
 const OptionTable<GroupingOptions>& GroupingOptions::Fields() {
@@ -239,6 +320,19 @@ const OptionTable<GroupingOptions>& GroupingOptions::Fields() {
            .min = 1,
            .special = 0,
            .special_meaning = "no island cleanup",
+           .advanced = true});
+    t.Add(&O::seam_cost,
+          {.name = "seam-cost",
+           .help = "coherent front views: the cost of a seam between neighbouring faces against "
+                   "a view's obliqueness (1 - cosine / best cosine)",
+           .min = 0.0,
+           .advanced = true});
+    t.Add(&O::min_cosine_ratio,
+          {.name = "min-cosine-ratio",
+           .help = "coherent front views: a face takes no view whose cosine is below this "
+                   "fraction of its best",
+           .min = 0.0,
+           .max = 1.0,
            .advanced = true});
     t.Add(&O::zbuffer_max_side, {.name = "zbuffer-max-side",
                                  .help = "longest side of the per-view visibility z-buffers",
@@ -270,7 +364,10 @@ GroupingResult GroupFaces(const Mesh& mesh, const std::vector<View>& views,
   const ViewMeasures measures = MeasureViews(faces, views, excluded, options, progress);
   GroupingResult result;
   ChooseFrontViews(measures, faces.size(), nv, options.correction, &result);
+  if (options.seam_cost > 0.0)
+    MakeFrontViewsCoherent(measures, faces, options.seam_cost, options.min_cosine_ratio, &result);
   if (options.max_island_faces > 0) CleanIslands(faces, options.max_island_faces, &result);
+  CountPatches(faces, &result);
   progress.EndStage();
   result.seconds = stopwatch.ElapsedSeconds();
   return result;

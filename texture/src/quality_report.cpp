@@ -68,6 +68,9 @@ QualityReport SummarizeTexture(const GroupingResult& grouping, const TextureMap&
   report.corrected_faces = grouping.corrected_faces;
   report.uncorrectable_faces = grouping.uncorrectable_faces;
   report.island_faces_switched = grouping.island_faces_switched;
+  report.coherence_faces_switched = grouping.coherence_faces_switched;
+  report.patches = grouping.patches;
+  report.mean_patch_faces = grouping.mean_patch_faces;
   report.filled_faces = map.filled_faces;
   report.blended_texels = map.blended_texels;
   report.corrected_texels = map.corrected_texels;
@@ -95,7 +98,10 @@ nlohmann::json QualityReportJson(const QualityReport& r) {
   report["grouping"] = {{"unseen_faces", r.unseen_faces},
                         {"corrected_faces", r.corrected_faces},
                         {"uncorrectable_faces", r.uncorrectable_faces},
-                        {"island_faces_switched", r.island_faces_switched}};
+                        {"island_faces_switched", r.island_faces_switched},
+                        {"coherence_faces_switched", r.coherence_faces_switched},
+                        {"patches", r.patches},
+                        {"mean_patch_faces", r.mean_patch_faces}};
   report["filled_faces"] = r.filled_faces;
   report["blended_texels"] = r.blended_texels;
   report["corrected_texels"] = r.corrected_texels;

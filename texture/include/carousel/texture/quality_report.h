@@ -55,6 +55,9 @@ struct QualityReport {
   int corrected_faces = 0;
   int uncorrectable_faces = 0;
   int island_faces_switched = 0;
+  int coherence_faces_switched = 0;
+  int patches = 0;  // connected groups of faces with one front view
+  double mean_patch_faces = 0.0;
   // From the transfer (TextureMap).
   int filled_faces = 0;
   int blended_texels = 0;

@@ -41,6 +41,14 @@ struct GroupingOptions {
   bool correction = true;
   // Island cleanup: groups of at most this many faces may switch to a neighbour's view (0: off).
   int max_island_faces = 8;
+  // Coherent front views: each face's choice costs 1 - (its cosine / the face's best cosine),
+  // and every neighbouring face with another front view adds seam_cost; the sum is minimised
+  // face by face (iterated conditional modes) from the most frontal choice, among views whose
+  // cosine is at least min_cosine_ratio of the best. Where the mesh is off (a visual hull's
+  // concavities), neighbouring faces' best views alternate and make a mosaic of triangle-sized
+  // patches; this keeps large patches. 0: every face takes its most frontal view.
+  double seam_cost = 0.25;
+  double min_cosine_ratio = 0.7;
   // Longest side of the per-view z-buffers, pixels (the photo is scaled down to it), 64..8192.
   int zbuffer_max_side = 1600;
   // The description of every field above (core/options.h): flags, widgets, range checks.
@@ -60,6 +68,10 @@ struct GroupingResult {
   int corrected_faces = 0;      // moved to another view by the mask check
   int uncorrectable_faces = 0;  // background under them in every view that sees them
   int island_faces_switched = 0;
+  int coherence_faces_switched = 0;  // faces that took a neighbour's view (seam_cost)
+  // Patches: connected groups of faces with the same front view (faces across an edge).
+  int patches = 0;
+  double mean_patch_faces = 0.0;
   double seconds = 0.0;
 };
 
