@@ -215,20 +215,34 @@ TEST(RendererTest, GlossyMaterialsAddSmallWhiteHighlights) {
 
 // The contact shadow darkens the plate at the object's base and fades with distance; the
 // object and the mask are untouched.
-TEST(RendererTest, ContactShadowDarkensThePlateAtTheBaseOnly) {
+// A grey sphere on the plate rendered plain and with a shadow; the shadow leaves the mask and
+// the object itself (away from its anti-aliased outline, whose pixels hold plate samples)
+// untouched. `diff`: the two renders' absolute difference.
+struct ShadowPair {
+  CameraModel camera;
+  RenderResult plain, shadowed;
+  cv::Mat diff;
+};
+ShadowPair RenderShadow(double plate_radius_m, double RenderOptions::*shadow, double amount) {
   const Scene sphere = MakeSphereScene(0.05, {0, 0, 0.05}, 5, {0.7f, 0.7f, 0.7f});
-  const CameraModel camera = StudioCamera(320, 240, 30, sphere.Bounds(), {});
+  ShadowPair pair;
+  pair.camera = StudioCamera(320, 240, 30, sphere.Bounds(), {});
   RenderOptions options;
-  options.plate_radius_m = 0.15;
-  const RenderResult plain = Render(sphere, camera, 0.0, options);
-  options.contact_shadow = 0.6;
-  const RenderResult shadowed = Render(sphere, camera, 0.0, options);
-  EXPECT_EQ(cv::countNonZero(plain.mask != shadowed.mask), 0);
-  cv::Mat diff, inside;
-  cv::absdiff(plain.image, shadowed.image, diff);
-  // The object itself, away from its anti-aliased outline (whose pixels hold plate samples).
-  cv::erode(plain.mask, inside, cv::Mat(), cv::Point(-1, -1), 2);
-  EXPECT_EQ(cv::mean(diff, inside)[1], 0.0);
+  options.plate_radius_m = plate_radius_m;
+  pair.plain = Render(sphere, pair.camera, 0.0, options);
+  options.*shadow = amount;
+  pair.shadowed = Render(sphere, pair.camera, 0.0, options);
+  EXPECT_EQ(cv::countNonZero(pair.plain.mask != pair.shadowed.mask), 0);
+  cv::absdiff(pair.plain.image, pair.shadowed.image, pair.diff);
+  cv::Mat inside;
+  cv::erode(pair.plain.mask, inside, cv::Mat(), cv::Point(-1, -1), 2);
+  EXPECT_EQ(cv::mean(pair.diff, inside)[1], 0.0);
+  return pair;
+}
+
+TEST(RendererTest, ContactShadowDarkensThePlateAtTheBaseOnly) {
+  const auto [camera, plain, shadowed, diff] =
+      RenderShadow(0.15, &RenderOptions::contact_shadow, 0.6);
   // Plate pixels just below the sphere's image (its base) against the plate's far rim.
   const cv::Rect box = cv::boundingRect(plain.mask);
   const int below = std::min(box.br().y + 2, camera.height - 1);
@@ -283,18 +297,7 @@ TEST(RendererTest, VignettingAndFalloffDarkenTheCornersByTheirFractions) {
 // The key light (above, front left) casts the object's shadow onto the plate behind it to the
 // right, soft at its edge; the object and the mask are untouched, the lit side of the plate too.
 TEST(RendererTest, CastShadowFallsOnThePlateAwayFromTheKeyLightAndIsSoft) {
-  const Scene sphere = MakeSphereScene(0.05, {0, 0, 0.05}, 5, {0.7f, 0.7f, 0.7f});
-  const CameraModel camera = StudioCamera(320, 240, 30, sphere.Bounds(), {});
-  RenderOptions options;
-  options.plate_radius_m = 0.2;
-  const RenderResult plain = Render(sphere, camera, 0.0, options);
-  options.cast_shadow = 0.8;
-  const RenderResult shadowed = Render(sphere, camera, 0.0, options);
-  EXPECT_EQ(cv::countNonZero(plain.mask != shadowed.mask), 0);
-  cv::Mat diff, inside;
-  cv::absdiff(plain.image, shadowed.image, diff);
-  cv::erode(plain.mask, inside, cv::Mat(), cv::Point(-1, -1), 2);
-  EXPECT_EQ(cv::mean(diff, inside)[1], 0.0);
+  const auto [camera, plain, shadowed, diff] = RenderShadow(0.2, &RenderOptions::cast_shadow, 0.8);
   cv::Mat green;
   cv::extractChannel(diff, green, 1);
   const cv::Mat dark = (green > 12) & (plain.mask == 0);
