@@ -65,10 +65,11 @@ TEST(CalibrationRunTest, AnEstimatedCalibrationTexturesWithinADecibelOfTheTruth)
   ASSERT_EQ(r.code, 0) << r.out;
   EXPECT_THAT(r.out, HasSubstr("0 photos taken, 32 kept from before"));
 
-  // The same product session with the simulator's exact cameras and with the estimated ones.
-  const std::vector<std::string> product = {"run",     "--sim", "--size",          "960x640",
-                                            "--views", "8",     "--exclude-views", "2",
-                                            "--out",   out,     "--data",          data};
+  // The same product session with the simulator's exact cameras and with the estimated ones
+  // (the held-out view is scored by the texture stage: nothing to publish).
+  const std::vector<std::string> product = {
+      "run", "--sim", "--size", "960x640", "--views", "8",           "--exclude-views",
+      "2",   "--out", out,      "--data",  data,      "--no-publish"};
   std::vector<std::string> truth = product;
   truth.insert(truth.end(), {"--product", "truth"});
   ASSERT_EQ(Carousel(truth).code, 0);
