@@ -150,30 +150,42 @@ Mesh MakeDisc(double radius, int segments, int rings) {
   return mesh;
 }
 
-Mesh MakeMarchingBlob(int resolution, double noise, std::uint64_t seed) {
+namespace {
+
+void CheckBlobArguments(int resolution, double noise) {
   CAROUSEL_THROW_IF(resolution < 4 || resolution > 512, InvalidArgument,
-                    "MakeMarchingBlob: resolution must be in 4..512, got " << resolution);
-  CAROUSEL_THROW_IF(!(noise >= 0.0), InvalidArgument, "MakeMarchingBlob: noise must be >= 0");
-  // Lobes: centre, radius, weight.
-  struct Lobe {
-    Vec3d centre;
-    double sigma;
-    double weight;
-  };
-  const std::array<Lobe, 5> lobes = {{{{0.0, 0.0, 0.0}, 0.45, 1.0},
-                                      {{0.45, 0.1, 0.1}, 0.3, 0.8},
-                                      {{-0.35, 0.3, -0.15}, 0.28, 0.8},
-                                      {{0.05, -0.4, 0.3}, 0.25, 0.7},
-                                      {{-0.1, 0.05, -0.5}, 0.22, 0.7}}};
+                    "blob: resolution must be in 4..512, got " << resolution);
+  CAROUSEL_THROW_IF(!(noise >= 0.0), InvalidArgument, "blob: noise must be >= 0");
+}
+
+// A Gaussian lobe of a blob's field: centre, radius, weight.
+struct Lobe {
+  Vec3d centre;
+  double sigma;
+  double weight;
+};
+
+// Deterministic uniform numbers in [0, 1) from a seed (xorshift64).
+class BlobRandom {
+ public:
+  explicit BlobRandom(std::uint64_t seed) : state_(seed * 0x9E3779B97F4A7C15ull + 1) {}
+  double Next() {
+    state_ ^= state_ << 13;
+    state_ ^= state_ >> 7;
+    state_ ^= state_ << 17;
+    return static_cast<double>(state_ >> 11) * (1.0 / 9007199254740992.0);
+  }
+
+ private:
+  std::uint64_t state_;
+};
+
+// The zero set of -0.5 + the lobes' sum + noise over [-1, 1]^3, contoured by marching
+// tetrahedra on a resolution^3 grid.
+Mesh ContourLobes(const std::vector<Lobe>& lobes, int resolution, double noise,
+                  BlobRandom& random) {
   const int n = resolution + 1;
   const double h = 2.0 / resolution;
-  std::uint64_t state = seed * 0x9E3779B97F4A7C15ull + 1;  // xorshift64
-  auto next_random = [&]() {
-    state ^= state << 13;
-    state ^= state >> 7;
-    state ^= state << 17;
-    return static_cast<double>(state >> 11) * (1.0 / 9007199254740992.0);
-  };
   auto corner = [&](int i, int j, int k) { return Vec3d(-1 + i * h, -1 + j * h, -1 + k * h); };
   std::vector<double> field(static_cast<std::size_t>(n) * n * n);
   auto index = [&](int i, int j, int k) { return (static_cast<std::size_t>(k) * n + j) * n + i; };
@@ -186,7 +198,7 @@ Mesh MakeMarchingBlob(int resolution, double noise, std::uint64_t seed) {
           f += lobe.weight * std::exp(-(x - lobe.centre).sqrnorm() / (2 * lobe.sigma * lobe.sigma));
         // Noise in the field: bumps of up to about `noise` cells (the field's slope at the
         // surface is about 1.5 per unit length), deterministic per corner.
-        f += noise * h * 1.5 * (2.0 * next_random() - 1.0);
+        f += noise * h * 1.5 * (2.0 * random.Next() - 1.0);
         if (f == 0.0) f = -1e-12;
         field[index(i, j, k)] = f;
       }
@@ -235,6 +247,35 @@ Mesh MakeMarchingBlob(int resolution, double noise, std::uint64_t seed) {
       }
   mesh.RecomputeNormals();
   return mesh;
+}
+
+}  // namespace
+
+Mesh MakeMarchingBlob(int resolution, double noise, std::uint64_t seed) {
+  CheckBlobArguments(resolution, noise);
+  const std::vector<Lobe> lobes = {{{0.0, 0.0, 0.0}, 0.45, 1.0},
+                                   {{0.45, 0.1, 0.1}, 0.3, 0.8},
+                                   {{-0.35, 0.3, -0.15}, 0.28, 0.8},
+                                   {{0.05, -0.4, 0.3}, 0.25, 0.7},
+                                   {{-0.1, 0.05, -0.5}, 0.22, 0.7}};
+  BlobRandom random(seed);
+  return ContourLobes(lobes, resolution, noise, random);
+}
+
+Mesh MakeRandomBlob(int resolution, double noise, std::uint64_t seed) {
+  CheckBlobArguments(resolution, noise);
+  BlobRandom random(seed ^ 0x5DEECE66Dull);
+  // A central lobe and 3 to 7 more, each reaching out from it in a random direction.
+  std::vector<Lobe> lobes = {{{0.0, 0.0, 0.0}, 0.35 + 0.1 * random.Next(), 1.0}};
+  const int extra = 3 + static_cast<int>(random.Next() * 5.0);
+  while (static_cast<int>(lobes.size()) <= extra) {
+    Vec3d direction(2 * random.Next() - 1, 2 * random.Next() - 1, 2 * random.Next() - 1);
+    if (direction.sqrnorm() < 1e-4 || direction.sqrnorm() > 1.0) continue;
+    direction.normalize();
+    lobes.push_back({direction * (0.3 + 0.25 * random.Next()), 0.15 + 0.15 * random.Next(),
+                     0.6 + 0.4 * random.Next()});
+  }
+  return ContourLobes(lobes, resolution, noise, random);
 }
 
 }  // namespace carousel

@@ -1,5 +1,6 @@
 #include "carousel/core/mesh.h"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
@@ -84,6 +85,24 @@ TEST(MeshTest, MarchingBlobIsClosedOutwardAndDeterministic) {
   EXPECT_NE(noisy.n_faces(), blob.n_faces());
   EXPECT_EQ(MakeMarchingBlob(24, 0.3, 1).n_faces(), noisy.n_faces());
   EXPECT_THROW(MakeMarchingBlob(2, 0.1, 1), InvalidArgument);
+}
+
+// Random blobs: closed and outward like the fixed one, the same for a seed, another shape
+// for another seed (volumes differ), about 15 r^2 faces.
+TEST(MeshTest, RandomBlobsAreClosedAndDifferBySeed) {
+  std::vector<double> volumes;
+  for (const std::uint64_t seed : {1u, 2u, 3u, 4u}) {
+    const Mesh blob = MakeRandomBlob(24, 0.3, seed);
+    EXPECT_EQ(BoundaryEdges(blob), 0u) << seed;
+    EXPECT_GT(blob.n_faces(), 5u * 24u * 24u) << seed;
+    EXPECT_LT(blob.n_faces(), 25u * 24u * 24u) << seed;
+    volumes.push_back(SignedVolume(blob));
+    EXPECT_GT(volumes.back(), 0.05) << seed;
+    EXPECT_EQ(MakeRandomBlob(24, 0.3, seed).n_faces(), blob.n_faces()) << seed;
+  }
+  std::sort(volumes.begin(), volumes.end());
+  for (std::size_t i = 1; i < volumes.size(); ++i) EXPECT_GT(volumes[i], volumes[i - 1] * 1.01);
+  EXPECT_THROW(MakeRandomBlob(600, 0.1, 1), InvalidArgument);
 }
 
 TEST(MeshTest, DiscHasOneBoundaryLoopAndFacesUp) {
