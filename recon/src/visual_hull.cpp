@@ -808,10 +808,12 @@ std::vector<cv::Mat> OthersHullPriors(const std::vector<View>& views,
                         views[v].name() << ": the mask does not match the camera's image size");
       scales[v] = std::min(1.0, kPriorSize / std::max(mask.cols, mask.rows));
       cameras[v] = scales[v] < 1.0 ? views[v].camera().Scaled(scales[v]) : views[v].camera();
+      // Sampled at the pixel centres (an area average reads all of an 18-Mpx mask, and the
+      // grid is coarser than either).
       cv::Mat small = mask;
       if (scales[v] < 1.0)
         cv::resize(mask, small, cv::Size(cameras[v].width, cameras[v].height), 0, 0,
-                   cv::INTER_AREA);
+                   cv::INTER_NEAREST_EXACT);
       data[v].SetCamera(cameras[v]);
       if (cv::countNonZero(small >= 128) > 0)
         data[v].distance = std::make_unique<DistanceMap>(small, views[v].name());
@@ -872,7 +874,8 @@ std::vector<cv::Mat> OthersHullPriors(const std::vector<View>& views,
   ParallelFor(cells, 4096, threads, [&](std::size_t begin, std::size_t end) {
     for (std::size_t c = begin; c < end; ++c) {
       const Eigen::Vector3d x = cell_centre(c);
-      for (std::size_t v = 0; v < n; ++v) {
+      // Once two views carve the cell it is outside every view's others' hull.
+      for (std::size_t v = 0; v < n && outside[c] < 2; ++v) {
         const ViewData& d = data[v];
         const Eigen::Vector3d p = d.rotation * x + d.translation;
         if (p.z() - rho <= kNearM) continue;  // unknown
@@ -902,20 +905,36 @@ std::vector<cv::Mat> OthersHullPriors(const std::vector<View>& views,
       cv::Mat is(may.size(), CV_8UC1, cv::Scalar(0));
       double footprint_sum = 0.0;
       int footprints = 0;
+      const auto in_may = [&](std::size_t c) {
+        return outside[c] == 0 || (outside[c] == 1 && only_outside[c] == static_cast<int>(v));
+      };
+      // The footprints of the region's surface cells cover its projection (a ray through it
+      // enters through one of them): the inner cells need not be drawn into `may`.
+      const std::size_t slice = static_cast<std::size_t>(cells_per_axis) * cells_per_axis;
+      const auto on_surface = [&](std::size_t c) {
+        const std::size_t i = c % cells_per_axis;
+        const std::size_t j = (c / cells_per_axis) % cells_per_axis;
+        const std::size_t k = c / slice;
+        const auto last = static_cast<std::size_t>(cells_per_axis - 1);
+        if (i == 0 || j == 0 || k == 0 || i == last || j == last || k == last) return true;
+        return !in_may(c - 1) || !in_may(c + 1) || !in_may(c - cells_per_axis) ||
+               !in_may(c + cells_per_axis) || !in_may(c - slice) || !in_may(c + slice);
+      };
       for (std::size_t c = 0; c < cells; ++c) {
-        const bool in_may =
-            outside[c] == 0 || (outside[c] == 1 && only_outside[c] == static_cast<int>(v));
-        if (!in_may) continue;
+        if (!in_may(c)) continue;
         const Eigen::Vector3d p = d.rotation * cell_centre(c) + d.translation;
         if (p.z() - rho <= kNearM) continue;
-        const Eigen::Vector2d pixel = d.camera->ProjectFromCam(p);
         const double r_out = d.focal_max * rho / (p.z() - rho) + 1.0;
         footprint_sum += r_out;
         ++footprints;
-        const cv::Point centre(cvRound(pixel.x()), cvRound(pixel.y()));
-        cv::circle(may, centre, static_cast<int>(std::ceil(r_out)), cv::Scalar(255), cv::FILLED);
         const bool in_is =
             not_inside[c] == 0 || (not_inside[c] == 1 && only_not_inside[c] == static_cast<int>(v));
+        const bool surface = on_surface(c);
+        if (!surface && !in_is) continue;
+        const Eigen::Vector2d pixel = d.camera->ProjectFromCam(p);
+        const cv::Point centre(cvRound(pixel.x()), cvRound(pixel.y()));
+        if (surface)
+          cv::circle(may, centre, static_cast<int>(std::ceil(r_out)), cv::Scalar(255), cv::FILLED);
         if (in_is) {
           const double r_in = d.focal_mean * inner / (p.z() + rho);
           cv::circle(is, centre, std::max(1, static_cast<int>(r_in)), cv::Scalar(255), cv::FILLED);
