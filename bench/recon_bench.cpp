@@ -73,6 +73,7 @@ int main(int argc, char** argv) {
   int max_resolution = recon::VisualHullOptions().max_resolution;
   double voxel_px = recon::VisualHullOptions().voxel_px, size_m = 0.25, noise = 1.5;
   bool truth_masks = false;
+  bool silhouettes_only = false;
   BenchFlags flags(argc, argv,
                    "recon_bench: reconstruction on the simulated rig, measured against the truth");
   flags.Option("--scene", &scene_name, "shoe, bottle, ring, sphere")
@@ -100,6 +101,7 @@ int main(int argc, char** argv) {
       .Option("--noise", &noise, "render noise sigma, grey levels")
       .Option("--jpeg", &jpeg, "JPEG quality")
       .Flag("--truth-masks", &truth_masks, "carve the hull from the true masks")
+      .Flag("--silhouettes-only", &silhouettes_only, "stop after the silhouettes")
       .Option("--save", &save, "folder for masks and meshes, empty = none");
   if (const std::optional<int> exit_code = flags.Parse(std::cout, std::cerr)) return *exit_code;
   try {
@@ -200,6 +202,7 @@ int main(int argc, char** argv) {
                 silhouette_seconds, min_iou, worst_view.c_str(),
                 sum_iou / static_cast<double>(sim_views.views.size()));
 
+    if (silhouettes_only) return 0;
     recon::VisualHullOptions hull_options;
     hull_options.voxel_px = voxel_px;
     hull_options.resolution = resolution;
