@@ -10,7 +10,9 @@
 #include <sstream>
 
 #include <Eigen/Dense>
+#include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
+#include <opencv2/imgproc/detail/gcgraph.hpp>
 
 #include "carousel/core/error.h"
 #include "carousel/core/logging.h"
@@ -172,8 +174,7 @@ bool FitColourModel(const std::vector<Sample>& samples, const std::vector<bool>&
     const double limit = std::clamp(3.0 * model->rms, floor_levels, 2.5 * floor_levels);
     bool changed = false;
     for (std::size_t i = 0; i < samples.size(); ++i) {
-      const bool in =
-          cv::norm(samples[i].colour - model->At(samples[i].x, samples[i].y)) <= limit;
+      const bool in = cv::norm(samples[i].colour - model->At(samples[i].x, samples[i].y)) <= limit;
       changed = changed || in != inlier[i];
       inlier[i] = in;
     }
@@ -435,12 +436,247 @@ class BorderResiduals {
   std::vector<Cluster> clusters_;
 };
 
-// Segmentation by graph cut (OpenCV's GrabCut: colour mixtures for object and background,
-// min-cut with a contrast-sensitive smoothness term), at a working resolution, on the region
-// around the candidates. `candidates` (CV_8UC1, 255 = not the expected backdrop) seeds it: a
-// candidate whose colour is also one of the border band's is probably background (cloth, a
-// stand), the others probably object; the border band is background. Returns the full-size
-// binary mask (255 = object).
+// A colour mixture of kMixtureComponents Gaussians (full covariance, 8-bit BGR), as GrabCut's.
+constexpr int kMixtureComponents = 5;
+// Colour samples a mixture is learned from, at most (a regular subset of the side's pixels).
+constexpr int kMixtureSamples = 20000;
+
+class ColourMixture {
+ public:
+  // Learns the mixture from `samples` (CV_32FC3 rows) and their component (`component`, one
+  // int per sample). Components without samples keep weight 0.
+  void Learn(const cv::Mat& samples, const std::vector<int>& component) {
+    std::array<Eigen::Vector3d, kMixtureComponents> sum;
+    std::array<Eigen::Matrix3d, kMixtureComponents> prod;
+    std::array<int, kMixtureComponents> count{};
+    for (int k = 0; k < kMixtureComponents; ++k) {
+      sum[k].setZero();
+      prod[k].setZero();
+    }
+    for (int i = 0; i < samples.rows; ++i) {
+      const auto& c = samples.at<cv::Vec3f>(i);
+      const Eigen::Vector3d x(c[0], c[1], c[2]);
+      const auto k = static_cast<std::size_t>(component[static_cast<std::size_t>(i)]);
+      sum[k] += x;
+      prod[k] += x * x.transpose();
+      ++count[k];
+    }
+    for (std::size_t k = 0; k < kMixtureComponents; ++k) {
+      Gaussian& g = gaussians_[k];
+      g.weight = samples.rows > 0 ? static_cast<double>(count[k]) / samples.rows : 0.0;
+      if (count[k] == 0) continue;
+      g.mean = sum[k] / count[k];
+      Eigen::Matrix3d cov = prod[k] / count[k] - g.mean * g.mean.transpose();
+      // A component of one flat colour (a clipped highlight, the backdrop's own level) is
+      // widened to stay invertible, as GrabCut does.
+      cov.diagonal().array() += 0.01;
+      const double det = cov.determinant();
+      if (!(det > 1e-12)) cov.diagonal().array() += 1.0;
+      g.inverse = cov.inverse();
+      g.norm = 1.0 / std::sqrt(std::max(cov.determinant(), 1e-12));
+    }
+  }
+  // The mixture's density at colour x (up to the constant (2 pi)^-3/2).
+  double Density(const Eigen::Vector3d& x) const {
+    double p = 0.0;
+    for (const Gaussian& g : gaussians_) {
+      if (g.weight <= 0.0) continue;
+      const Eigen::Vector3d d = x - g.mean;
+      p += g.weight * g.norm * std::exp(-0.5 * d.dot(g.inverse * d));
+    }
+    return p;
+  }
+  // The component most likely to have produced x.
+  int Component(const Eigen::Vector3d& x) const {
+    int best = 0;
+    double best_p = -1.0;
+    for (int k = 0; k < kMixtureComponents; ++k) {
+      const Gaussian& g = gaussians_[static_cast<std::size_t>(k)];
+      if (g.weight <= 0.0) continue;
+      const Eigen::Vector3d d = x - g.mean;
+      const double p = g.weight * g.norm * std::exp(-0.5 * d.dot(g.inverse * d));
+      if (p > best_p) {
+        best_p = p;
+        best = k;
+      }
+    }
+    return best;
+  }
+
+ private:
+  struct Gaussian {
+    double weight = 0.0;
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    Eigen::Matrix3d inverse = Eigen::Matrix3d::Identity();
+    double norm = 1.0;
+  };
+  std::array<Gaussian, kMixtureComponents> gaussians_;
+};
+
+// A regular subset (at most kMixtureSamples) of the pixels of `image` whose label is one of
+// the side's (object: GC_FGD / GC_PR_FGD, background: GC_BGD / GC_PR_BGD), as CV_32FC3 rows.
+cv::Mat MixtureSamples(const cv::Mat& image, const cv::Mat& labels, bool object) {
+  int count = 0;
+  for (int y = 0; y < labels.rows; ++y) {
+    const auto* l = labels.ptr<std::uint8_t>(y);
+    for (int x = 0; x < labels.cols; ++x) count += ((l[x] & 1) != 0) == object ? 1 : 0;
+  }
+  const int stride = std::max(1, (count + kMixtureSamples - 1) / kMixtureSamples);
+  cv::Mat samples(0, 1, CV_32FC3);
+  samples.reserve(static_cast<std::size_t>(count / stride + 1));
+  int seen = 0;
+  for (int y = 0; y < labels.rows; ++y) {
+    const auto* l = labels.ptr<std::uint8_t>(y);
+    const auto* c = image.ptr<cv::Vec3b>(y);
+    for (int x = 0; x < labels.cols; ++x) {
+      if ((((l[x] & 1) != 0) != object) || seen++ % stride != 0) continue;
+      samples.push_back(cv::Vec3f(c[x][0], c[x][1], c[x][2]));
+    }
+  }
+  return samples;
+}
+
+// GrabCut's iterated graph cut (a colour mixture per side; an 8-connected, contrast-sensitive
+// smoothness term; each iteration re-learns the mixtures from the last cut), solved over the
+// undecided pixels only: the sure ones (GC_FGD, GC_BGD) are the terminals, so the cut is the
+// one over the whole region, while OpenCV's grabCut pays for every pixel. The mixtures are
+// learned from a regular subset of each side's pixels. `labels` (GC codes) is updated.
+void IteratedGraphCut(const cv::Mat& image, int iterations, cv::Mat* labels) {
+  const int rows = image.rows;
+  const int cols = image.cols;
+  const auto colour = [&](int y, int x) {
+    const auto& c = image.at<cv::Vec3b>(y, x);
+    return Eigen::Vector3d(c[0], c[1], c[2]);
+  };
+  // The neighbours before a pixel in scan order (left, up-left, up, up-right), as GrabCut.
+  constexpr std::array<std::array<int, 2>, 4> kBefore{{{0, -1}, {-1, -1}, {-1, 0}, {-1, 1}}};
+  // Smoothness: gamma exp(-beta |dI|^2) / distance, beta from the mean squared difference.
+  constexpr double kGamma = 50.0;
+  double sum_sq = 0.0;
+  std::int64_t pairs = 0;
+  for (int y = 0; y < rows; ++y) {
+    for (int x = 0; x < cols; ++x) {
+      for (const auto& d : kBefore) {
+        const int ny = y + d[0];
+        const int nx = x + d[1];
+        if (ny < 0 || nx < 0 || nx >= cols) continue;
+        sum_sq += (colour(y, x) - colour(ny, nx)).squaredNorm();
+        ++pairs;
+      }
+    }
+  }
+  const double beta = sum_sq > 0.0 ? 0.5 * static_cast<double>(pairs) / sum_sq : 0.0;
+  const auto smoothness = [&](int y, int x, int ny, int nx) {
+    const double w = kGamma * std::exp(-beta * (colour(y, x) - colour(ny, nx)).squaredNorm());
+    return (ny != y && nx != x) ? w / std::numbers::sqrt2 : w;
+  };
+  // The undecided pixels, numbered.
+  cv::Mat index(rows, cols, CV_32SC1, cv::Scalar(-1));
+  int undecided = 0;
+  for (int y = 0; y < rows; ++y) {
+    const auto* l = labels->ptr<std::uint8_t>(y);
+    auto* i = index.ptr<int>(y);
+    for (int x = 0; x < cols; ++x)
+      if (l[x] == cv::GC_PR_FGD || l[x] == cv::GC_PR_BGD) i[x] = undecided++;
+  }
+  if (undecided == 0) return;
+  // Mixtures started from k-means (seeded: a photo's silhouette must not depend on the worker
+  // or on what it segmented before).
+  std::array<ColourMixture, 2> mixtures;  // background, object
+  std::array<cv::Mat, 2> samples;
+  for (int side = 0; side < 2; ++side) {
+    samples[side] = MixtureSamples(image, *labels, side == 1);
+    if (samples[side].rows < kMixtureComponents) return;  // nothing to learn a side from
+    cv::Mat assignment;
+    cv::RNG& rng = cv::theRNG();
+    const std::uint64_t saved_state = rng.state;
+    rng.state = 0x2545F4914F6CDD1DULL;
+    cv::kmeans(samples[side].reshape(1), kMixtureComponents, assignment,
+               cv::TermCriteria(cv::TermCriteria::MAX_ITER, 10, 0.0), 1, cv::KMEANS_PP_CENTERS);
+    rng.state = saved_state;
+    mixtures[side].Learn(samples[side],
+                         std::vector<int>(assignment.begin<int>(), assignment.end<int>()));
+  }
+  std::vector<double> source(static_cast<std::size_t>(undecided));
+  std::vector<double> sink(static_cast<std::size_t>(undecided));
+  for (int iteration = 0; iteration < iterations; ++iteration) {
+    if (iteration > 0) {
+      for (int side = 0; side < 2; ++side) {
+        samples[side] = MixtureSamples(image, *labels, side == 1);
+        if (samples[side].rows < kMixtureComponents) return;
+      }
+    }
+    // Each sample to its most likely component, then the mixtures learned again.
+    for (int side = 0; side < 2; ++side) {
+      std::vector<int> component(static_cast<std::size_t>(samples[side].rows));
+      for (int i = 0; i < samples[side].rows; ++i) {
+        const auto& c = samples[side].at<cv::Vec3f>(i);
+        component[static_cast<std::size_t>(i)] =
+            mixtures[side].Component(Eigen::Vector3d(c[0], c[1], c[2]));
+      }
+      mixtures[side].Learn(samples[side], component);
+    }
+    // The graph: the undecided pixels, their links to each other and, for a link to a sure
+    // pixel, its weight added to that terminal's.
+    cv::detail::GCGraph<double> graph(static_cast<unsigned>(undecided),
+                                      static_cast<unsigned>(8 * undecided));
+    for (int y = 0; y < rows; ++y) {
+      const auto* i = index.ptr<int>(y);
+      for (int x = 0; x < cols; ++x) {
+        if (i[x] < 0) continue;
+        const Eigen::Vector3d c = colour(y, x);
+        const auto v = static_cast<std::size_t>(i[x]);
+        source[v] = -std::log(std::max(mixtures[0].Density(c), 1e-300));
+        sink[v] = -std::log(std::max(mixtures[1].Density(c), 1e-300));
+        graph.addVtx();
+      }
+    }
+    // Both directions of every neighbour pair once: the pair's later pixel looks back.
+    for (int y = 0; y < rows; ++y) {
+      for (int x = 0; x < cols; ++x) {
+        const int here = index.at<int>(y, x);
+        const std::uint8_t here_label = labels->at<std::uint8_t>(y, x);
+        for (const auto& d : kBefore) {
+          const int ny = y + d[0];
+          const int nx = x + d[1];
+          if (ny < 0 || nx < 0 || nx >= cols) continue;
+          const int there = index.at<int>(ny, nx);
+          if (here < 0 && there < 0) continue;  // both sure: no say in the cut
+          const double w = smoothness(y, x, ny, nx);
+          if (here >= 0 && there >= 0) {
+            graph.addEdges(here, there, w, w);
+            continue;
+          }
+          // One side sure: cutting the link costs w when the undecided pixel takes the other
+          // side (source = object).
+          const int open = here >= 0 ? here : there;
+          const std::uint8_t sure = here >= 0 ? labels->at<std::uint8_t>(ny, nx) : here_label;
+          if (sure == cv::GC_FGD)
+            source[static_cast<std::size_t>(open)] += w;
+          else
+            sink[static_cast<std::size_t>(open)] += w;
+        }
+      }
+    }
+    for (int v = 0; v < undecided; ++v)
+      graph.addTermWeights(v, source[static_cast<std::size_t>(v)],
+                           sink[static_cast<std::size_t>(v)]);
+    graph.maxFlow();
+    for (int y = 0; y < rows; ++y) {
+      const auto* i = index.ptr<int>(y);
+      auto* l = labels->ptr<std::uint8_t>(y);
+      for (int x = 0; x < cols; ++x)
+        if (i[x] >= 0) l[x] = graph.inSourceSegment(i[x]) ? cv::GC_PR_FGD : cv::GC_PR_BGD;
+    }
+  }
+}
+
+// Segmentation by graph cut (GrabCut's model: colour mixtures for object and background,
+// min-cut with a contrast-sensitive smoothness term; IteratedGraphCut), at a working
+// resolution, on the region around the candidates. `candidates` (CV_8UC1, 255 = not the expected
+// backdrop) seeds it: a candidate whose colour is also one of the border band's is probably
+// background (cloth, a stand), the others probably object; the border band is background. Returns
+// the full-size binary mask (255 = object).
 cv::Mat SegmentByGraphCut(const cv::Mat& image, const cv::Mat& candidates,
                           const ExpectedBackground& expected, const SilhouetteOptions& options,
                           const cv::Mat& prior, const std::string& name, double* largest_piece) {
@@ -565,21 +801,11 @@ cv::Mat SegmentByGraphCut(const cv::Mat& image, const cv::Mat& candidates,
   if (roi.br().x < full.width) labels.col(labels.cols - 1).setTo(cv::GC_BGD);
   if (roi.br().y < full.height) labels.row(labels.rows - 1).setTo(cv::GC_BGD);
   if (object_seeds == 0 && cv::countNonZero(labels & 1) == 0) return cv::Mat::zeros(full, CV_8UC1);
-  cv::Mat background_model, object_model;
-  // GrabCut's colour mixtures start from k-means on this thread's random generator: seeded, so
-  // that a photo's silhouette does not depend on which worker segmented it or what it did
-  // before.
-  cv::RNG& rng = cv::theRNG();
-  const std::uint64_t saved_state = rng.state;
-  rng.state = 0x2545F4914F6CDD1DULL;
   try {
-    cv::grabCut(small, labels, cv::Rect(), background_model, object_model, kGraphCutIterations,
-                cv::GC_INIT_WITH_MASK);
+    IteratedGraphCut(small, kGraphCutIterations, &labels);
   } catch (const cv::Exception& e) {
-    rng.state = saved_state;
     throw FormatError(name, std::string("silhouette segmentation failed: ") + e.what());
   }
-  rng.state = saved_state;
   cv::Mat object = (labels == cv::GC_FGD) | (labels == cv::GC_PR_FGD);
   cv::Mat result = cv::Mat::zeros(full, CV_8UC1);
   if (scale < 1.0) {
@@ -683,13 +909,26 @@ float LinearLevel(float srgb) {
                             (c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4)));
 }
 
-// Linear light (0..255 scale) back to sRGB codes (0..255).
+// Linear light (0..255 scale) back to sRGB codes (0..255), from a table interpolated
+// linearly (within 0.02 of a code; the matte's contrast test calls it for every band pixel).
 cv::Vec3f SrgbCode(const cv::Vec3f& linear) {
+  constexpr int kSteps = 4096;
+  static const std::array<float, kSteps + 1> table = [] {
+    std::array<float, kSteps + 1> t{};
+    for (int i = 0; i <= kSteps; ++i) {
+      const double l = static_cast<double>(i) / kSteps;
+      t[static_cast<std::size_t>(i)] = static_cast<float>(
+          255.0 * (l <= 0.0031308 ? 12.92 * l : 1.055 * std::pow(l, 1.0 / 2.4) - 0.055));
+    }
+    return t;
+  }();
   cv::Vec3f code;
   for (int c = 0; c < 3; ++c) {
-    const double l = std::clamp(linear[c] / 255.0, 0.0, 1.0);
-    code[c] = static_cast<float>(
-        255.0 * (l <= 0.0031308 ? 12.92 * l : 1.055 * std::pow(l, 1.0 / 2.4) - 0.055));
+    const float at = std::clamp(linear[c] / 255.0f, 0.0f, 1.0f) * kSteps;
+    const int i = std::min(static_cast<int>(at), kSteps - 1);
+    const float f = at - static_cast<float>(i);
+    code[c] = table[static_cast<std::size_t>(i)] * (1.0f - f) +
+              table[static_cast<std::size_t>(i) + 1] * f;
   }
   return code;
 }

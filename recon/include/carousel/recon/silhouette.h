@@ -36,7 +36,8 @@
 // silhouette reaches it is rejected: the frame cuts the object).
 // Then clean-up (specks, small holes) and boundary refinement to an alpha matte: each pixel of
 // a band around the outline gets alpha = <I - B, F - B> / |F - B|^2 with F and B the local
-// object and background colours (normalized convolution of the confident pixels either side).
+// object and background colours (those of the nearest confident pixel either side, then again
+// of the nearest wholly object and wholly background pixels right at the outline).
 // Masks are 8-bit alpha, 255 = object, >= 128 = object for the hull (DESIGN.md).
 #pragma once
 
