@@ -1059,24 +1059,36 @@ void RefineToAlpha(const cv::Mat& image, const SilhouetteOptions& options, bool 
         grown.setTo(255, edge);
       }
       if (cv::countNonZero(shrunk) == 0 || cv::countNonZero(grown) == region.area()) continue;
-      const cv::Mat colour = LinearColour(image(region));
+      // The colours: within the sure colours' reach of the core (a band pixel's nearest sure
+      // pixel lies within twice the band), smoothed over 3x3 (read one pixel further).
+      const cv::Rect inner = cv::Rect(core.x - pad, core.y - pad, core.width + 2 * pad,
+                                      core.height + 2 * pad) &
+                             frame;
+      const cv::Rect read = cv::Rect(inner.x - 1, inner.y - 1, inner.width + 2,
+                                     inner.height + 2) &
+                            frame;
       cv::Mat smooth;
-      cv::blur(colour, smooth, cv::Size(3, 3));
-      const cv::Mat object = NearestColour(smooth, shrunk);
-      const cv::Mat background = NearestColour(smooth, ~grown);
+      cv::blur(LinearColour(image(read)), smooth, cv::Size(3, 3));
+      smooth = smooth(cv::Rect(inner.tl() - read.tl(), inner.size()));
+      const cv::Rect in_region(inner.tl() - region.tl(), inner.size());
+      const cv::Mat object = NearestColour(smooth, shrunk(in_region));
+      const cv::Mat background = NearestColour(smooth, ~grown(in_region));
       const cv::Point offset = core.tl() - region.tl();
+      const cv::Point inner_offset = core.tl() - inner.tl();
       Tile tile{core, (*fg)(core).clone()};
       for (int y = 0; y < core.height; ++y) {
         const int ry = y + offset.y;
+        const int iy = y + inner_offset.y;
         const auto* g = grown.ptr<std::uint8_t>(ry) + offset.x;
         const auto* sh = shrunk.ptr<std::uint8_t>(ry) + offset.x;
-        const auto* f_row = object.ptr<cv::Vec3f>(ry) + offset.x;
-        const auto* b_row = background.ptr<cv::Vec3f>(ry) + offset.x;
-        const auto* i_row = colour.ptr<cv::Vec3f>(ry) + offset.x;
+        const auto* f_row = object.ptr<cv::Vec3f>(iy) + inner_offset.x;
+        const auto* b_row = background.ptr<cv::Vec3f>(iy) + inner_offset.x;
+        const auto* i_row = image.ptr<cv::Vec3b>(core.y + y) + core.x;
         auto* out = tile.alpha.ptr<std::uint8_t>(y);
         for (int x = 0; x < core.width; ++x) {
           if (!g[x] || sh[x]) continue;
-          MatteAlpha(i_row[x], f_row[x], b_row[x], min_contrast, third_colours, &out[x]);
+          MatteAlpha(LinearPixel(i_row[x]), f_row[x], b_row[x], min_contrast, third_colours,
+                     &out[x]);
         }
       }
       tiles.push_back(std::move(tile));
