@@ -23,7 +23,7 @@ namespace carousel::recon {
 namespace {
 
 // Longest side of the thumbnail the backdrop and plate models are fitted on, pixels.
-constexpr int kFitSize = 320;
+constexpr int kFitSize = 240;
 // Longest side of the copy the candidates' pieces are found on, pixels.
 constexpr double kPieceSize = 1024.0;
 // Pixels of the working copy everything but the boundary refinement runs on (about, where the
@@ -439,7 +439,7 @@ class BorderResiduals {
 // A colour mixture of kMixtureComponents Gaussians (full covariance, 8-bit BGR), as GrabCut's.
 constexpr int kMixtureComponents = 5;
 // Colour samples a mixture is learned from, at most (a regular subset of the side's pixels).
-constexpr int kMixtureSamples = 20000;
+constexpr int kMixtureSamples = 10000;
 
 class ColourMixture {
  public:
@@ -903,10 +903,24 @@ cv::Mat NearestColour(const cv::Mat& smooth, const cv::Mat& sure, cv::Mat* dista
 }
 
 // An 8-bit sRGB level as linear light (0..255 scale).
+// From a table interpolated linearly (within 0.01 of a level; the backlit shot needs it for
+// every pixel).
 float LinearLevel(float srgb) {
-  const double c = std::clamp(srgb / 255.0, 0.0, 1.0);
-  return static_cast<float>(255.0 *
-                            (c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4)));
+  constexpr int kSteps = 4096;
+  static const std::array<float, kSteps + 1> table = [] {
+    std::array<float, kSteps + 1> t{};
+    for (int i = 0; i <= kSteps; ++i) {
+      const double c = static_cast<double>(i) / kSteps;
+      t[static_cast<std::size_t>(i)] = static_cast<float>(
+          255.0 * (c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4)));
+    }
+    return t;
+  }();
+  const float at = std::clamp(srgb / 255.0f, 0.0f, 1.0f) * kSteps;
+  const int i = std::min(static_cast<int>(at), kSteps - 1);
+  const float f = at - static_cast<float>(i);
+  return table[static_cast<std::size_t>(i)] * (1.0f - f) +
+         table[static_cast<std::size_t>(i) + 1] * f;
 }
 
 // Linear light (0..255 scale) back to sRGB codes (0..255), from a table interpolated
