@@ -869,37 +869,48 @@ void CheckExposure(const cv::Mat& image, const cv::Mat& fg, const std::string& n
   }
 }
 
-// For each pixel, the colour (of `smooth`, CV_32FC3) at the nearest pixel marked in `sure`
-// (CV_8UC1, 255): the local colour of one side of an outline, taken where that side is surely
-// itself and nearest the pixel, so shading across the object does not bias it.
-cv::Mat NearestColour(const cv::Mat& smooth, const cv::Mat& sure, cv::Mat* distance_out = nullptr) {
+// For each pixel, the nearest pixel marked in `sure` (CV_8UC1, 255), as a position in `sure`
+// (CV_32SC2; (-1, -1) where none is): where the local colour of one side of an outline is
+// taken, where that side is surely itself and nearest the pixel, so shading across the object
+// does not bias it.
+cv::Mat NearestSure(const cv::Mat& sure) {
   cv::Mat distance, labels;
   cv::distanceTransform(~sure, distance, labels, cv::DIST_L2, cv::DIST_MASK_5,
                         cv::DIST_LABEL_PIXEL);
   // Labels number the marked pixels in scan order.
-  std::vector<cv::Vec3f> colour_of_label(1);
+  std::vector<cv::Point> position_of_label(1, cv::Point(-1, -1));
   for (int y = 0; y < sure.rows; ++y) {
     const auto* m = sure.ptr<std::uint8_t>(y);
-    const auto* c = smooth.ptr<cv::Vec3f>(y);
     const auto* l = labels.ptr<int>(y);
     for (int x = 0; x < sure.cols; ++x) {
       if (!m[x]) continue;
-      if (static_cast<std::size_t>(l[x]) >= colour_of_label.size())
-        colour_of_label.resize(static_cast<std::size_t>(l[x]) + 1);
-      colour_of_label[static_cast<std::size_t>(l[x])] = c[x];
+      const auto k = static_cast<std::size_t>(l[x]);
+      if (k >= position_of_label.size()) position_of_label.resize(k + 1, cv::Point(-1, -1));
+      position_of_label[k] = cv::Point(x, y);
     }
   }
-  cv::Mat nearest(sure.size(), CV_32FC3);
+  cv::Mat nearest(sure.size(), CV_32SC2);
   for (int y = 0; y < sure.rows; ++y) {
     const auto* l = labels.ptr<int>(y);
-    auto* out = nearest.ptr<cv::Vec3f>(y);
+    auto* out = nearest.ptr<cv::Point>(y);
     for (int x = 0; x < sure.cols; ++x) {
       const auto k = static_cast<std::size_t>(l[x]);
-      out[x] = k < colour_of_label.size() ? colour_of_label[k] : cv::Vec3f();
+      out[x] = k < position_of_label.size() ? position_of_label[k] : cv::Point(-1, -1);
     }
   }
-  if (distance_out != nullptr) *distance_out = distance;
   return nearest;
+}
+
+// The colour (of `colour`, CV_32FC3, as `at`'s positions) at each of `at`'s positions (black
+// where there is none).
+cv::Mat ColourAt(const cv::Mat& colour, const cv::Mat& at) {
+  cv::Mat out(at.size(), CV_32FC3);
+  for (int y = 0; y < at.rows; ++y) {
+    const auto* p = at.ptr<cv::Point>(y);
+    auto* o = out.ptr<cv::Vec3f>(y);
+    for (int x = 0; x < at.cols; ++x) o[x] = p[x].x >= 0 ? colour.at<cv::Vec3f>(p[x]) : cv::Vec3f();
+  }
+  return out;
 }
 
 // An 8-bit sRGB level as linear light (0..255 scale).
@@ -1016,6 +1027,15 @@ void MatteAlpha(const cv::Vec3f& i, const cv::Vec3f& f, const cv::Vec3f& b, doub
   *out = cv::saturate_cast<std::uint8_t>(255.0 * alpha);
 }
 
+// A photo to matte and its matte: `alpha` starts as the binary silhouette (CV_8UC1, the
+// photo's size). With `third_colours`, a colour that is no mix of the two sides is decided
+// (MatteAlpha).
+struct MatteShot {
+  const cv::Mat* image;
+  bool third_colours;
+  cv::Mat* alpha;
+};
+
 // Boundary refinement to an alpha matte: in a band around the outline, each pixel's coverage
 // alpha = <I - B, F - B> / |F - B|^2 with F and B the object's and the background's colours
 // nearest to it where each is sure (just beyond the band), in linear light, 8-bit; elsewhere 0
@@ -1023,23 +1043,25 @@ void MatteAlpha(const cv::Vec3f& i, const cv::Vec3f& f, const cv::Vec3f& b, doub
 // outline); a tile is processed with a margin that holds the band's reach and the sure colours
 // beyond it, and where a side has no sure pixel within it (a part thinner than the band) the
 // binary mask stays. Each pass reads the mask as the previous one left it: the tiles' results
-// are kept aside and written when the pass is done.
-void RefineToAlpha(const cv::Mat& image, const SilhouetteOptions& options, bool third_colours,
-                   cv::Mat* fg) {
+// are kept aside and written when the pass is done. Several shots of one outline (the same
+// binary silhouette) share the band and where its nearest sure pixels lie.
+void RefineToAlpha(const std::vector<MatteShot>& shots, const SilhouetteOptions& options) {
+  const cv::Mat& binary = *shots.front().alpha;  // unchanged until the first pass is done
+  const cv::Size size = binary.size();
   // The band covers the graph cut's working-resolution step.
   const int band =
       1 +
-      static_cast<int>(std::ceil(std::max(image.cols, image.rows) / (kGraphCutSize * 1.0) * 0.5));
+      static_cast<int>(std::ceil(std::max(size.width, size.height) / (kGraphCutSize * 1.0) * 0.5));
   const int pad = 2 * band + 2;
-  const cv::Rect frame(0, 0, image.cols, image.rows);
-  cv::Rect roi = cv::boundingRect(*fg);
+  const cv::Rect frame(0, 0, size.width, size.height);
+  cv::Rect roi = cv::boundingRect(binary);
   if (roi.area() == 0) return;
   roi = cv::Rect(roi.x - pad, roi.y - pad, roi.width + 2 * pad, roi.height + 2 * pad) & frame;
   const double min_contrast = 2.0 * std::max(options.noise_threshold, 4.0);
   constexpr int kTile = 64;
   struct Tile {
     cv::Rect core;
-    cv::Mat alpha;  // the pass's result for the core
+    std::vector<cv::Mat> alpha;  // per shot, the pass's result for the core
   };
   std::vector<Tile> tiles;
   for (int ty = roi.y; ty < roi.br().y; ty += kTile) {
@@ -1049,13 +1071,13 @@ void RefineToAlpha(const cv::Mat& image, const SilhouetteOptions& options, bool 
       const cv::Rect reach =
           cv::Rect(core.x - band, core.y - band, core.width + 2 * band, core.height + 2 * band) &
           frame;
-      const int object_px = cv::countNonZero((*fg)(reach));
+      const int object_px = cv::countNonZero(binary(reach));
       if (object_px == 0 || object_px == reach.area()) continue;
       const int margin = pad + band;
       const cv::Rect region = cv::Rect(core.x - margin, core.y - margin, core.width + 2 * margin,
                                        core.height + 2 * margin) &
                               frame;
-      const cv::Mat fg_region = (*fg)(region);
+      const cv::Mat fg_region = binary(region);
       // The band's two edges: the object shrunk and grown by a disc of the band's radius (by
       // distance: a morphology with a disc is many times slower on 18-Mpx photos' outlines).
       cv::Mat to_background, to_object;
@@ -1073,42 +1095,49 @@ void RefineToAlpha(const cv::Mat& image, const SilhouetteOptions& options, bool 
         grown.setTo(255, edge);
       }
       if (cv::countNonZero(shrunk) == 0 || cv::countNonZero(grown) == region.area()) continue;
-      // The colours: within the sure colours' reach of the core (a band pixel's nearest sure
-      // pixel lies within twice the band), smoothed over 3x3 (read one pixel further).
-      const cv::Rect inner = cv::Rect(core.x - pad, core.y - pad, core.width + 2 * pad,
-                                      core.height + 2 * pad) &
-                             frame;
-      const cv::Rect read = cv::Rect(inner.x - 1, inner.y - 1, inner.width + 2,
-                                     inner.height + 2) &
-                            frame;
-      cv::Mat smooth;
-      cv::blur(LinearColour(image(read)), smooth, cv::Size(3, 3));
-      smooth = smooth(cv::Rect(inner.tl() - read.tl(), inner.size()));
+      // The sure pixels nearest each pixel, within their reach of the core (a band pixel's
+      // nearest sure pixel lies within twice the band).
+      const cv::Rect inner =
+          cv::Rect(core.x - pad, core.y - pad, core.width + 2 * pad, core.height + 2 * pad) & frame;
       const cv::Rect in_region(inner.tl() - region.tl(), inner.size());
-      const cv::Mat object = NearestColour(smooth, shrunk(in_region));
-      const cv::Mat background = NearestColour(smooth, ~grown(in_region));
+      const cv::Mat nearest_object = NearestSure(shrunk(in_region));
+      const cv::Mat nearest_background = NearestSure(~grown(in_region));
       const cv::Point offset = core.tl() - region.tl();
       const cv::Point inner_offset = core.tl() - inner.tl();
-      Tile tile{core, (*fg)(core).clone()};
-      for (int y = 0; y < core.height; ++y) {
-        const int ry = y + offset.y;
-        const int iy = y + inner_offset.y;
-        const auto* g = grown.ptr<std::uint8_t>(ry) + offset.x;
-        const auto* sh = shrunk.ptr<std::uint8_t>(ry) + offset.x;
-        const auto* f_row = object.ptr<cv::Vec3f>(iy) + inner_offset.x;
-        const auto* b_row = background.ptr<cv::Vec3f>(iy) + inner_offset.x;
-        const auto* i_row = image.ptr<cv::Vec3b>(core.y + y) + core.x;
-        auto* out = tile.alpha.ptr<std::uint8_t>(y);
-        for (int x = 0; x < core.width; ++x) {
-          if (!g[x] || sh[x]) continue;
-          MatteAlpha(LinearPixel(i_row[x]), f_row[x], b_row[x], min_contrast, third_colours,
-                     &out[x]);
+      // Their colours smoothed over 3x3 (read one pixel further), per shot.
+      const cv::Rect read =
+          cv::Rect(inner.x - 1, inner.y - 1, inner.width + 2, inner.height + 2) & frame;
+      Tile tile{core, {}};
+      for (const MatteShot& shot : shots) {
+        cv::Mat smooth;
+        cv::blur(LinearColour((*shot.image)(read)), smooth, cv::Size(3, 3));
+        smooth = smooth(cv::Rect(inner.tl() - read.tl(), inner.size()));
+        const cv::Mat object = ColourAt(smooth, nearest_object);
+        const cv::Mat background = ColourAt(smooth, nearest_background);
+        cv::Mat alpha = binary(core).clone();
+        for (int y = 0; y < core.height; ++y) {
+          const int ry = y + offset.y;
+          const int iy = y + inner_offset.y;
+          const auto* g = grown.ptr<std::uint8_t>(ry) + offset.x;
+          const auto* sh = shrunk.ptr<std::uint8_t>(ry) + offset.x;
+          const auto* f_row = object.ptr<cv::Vec3f>(iy) + inner_offset.x;
+          const auto* b_row = background.ptr<cv::Vec3f>(iy) + inner_offset.x;
+          const auto* i_row = shot.image->ptr<cv::Vec3b>(core.y + y) + core.x;
+          auto* out = alpha.ptr<std::uint8_t>(y);
+          for (int x = 0; x < core.width; ++x) {
+            if (!g[x] || sh[x]) continue;
+            MatteAlpha(LinearPixel(i_row[x]), f_row[x], b_row[x], min_contrast, shot.third_colours,
+                       &out[x]);
+          }
         }
+        tile.alpha.push_back(std::move(alpha));
       }
       tiles.push_back(std::move(tile));
     }
   }
-  for (const Tile& tile : tiles) tile.alpha.copyTo((*fg)(tile.core));
+  for (const Tile& tile : tiles)
+    for (std::size_t s = 0; s < shots.size(); ++s)
+      tile.alpha[s].copyTo((*shots[s].alpha)(tile.core));
   // Second pass: each partly covered pixel matted again against the colours right at the
   // outline (the nearest pixels the first pass found wholly object and wholly background, if
   // within kLocalReach): an edge lit otherwise than the inside (a rim glow before a lit panel,
@@ -1126,41 +1155,46 @@ void RefineToAlpha(const cv::Mat& image, const SilhouetteOptions& options, bool 
     });
     return offsets;
   }();
-  for (Tile& tile : tiles) {
-    const cv::Rect core = tile.core;
-    const cv::Mat core_first = (*fg)(core);
-    if (cv::countNonZero((core_first > 0) & (core_first < 255)) == 0) {
-      tile.alpha.release();
-      continue;
-    }
-    core_first.copyTo(tile.alpha);
-    for (int y = 0; y < core.height; ++y) {
-      const auto* a = core_first.ptr<std::uint8_t>(y);
-      auto* out = tile.alpha.ptr<std::uint8_t>(y);
-      for (int x = 0; x < core.width; ++x) {
-        if (a[x] == 0 || a[x] == 255) continue;
-        const cv::Point p(core.x + x, core.y + y);
-        // The nearest wholly object and wholly background pixels, searched nearest first.
-        const cv::Point* object = nullptr;
-        const cv::Point* background = nullptr;
-        for (const cv::Point& o : local) {
-          const cv::Point q = p + o;
-          if (!frame.contains(q)) continue;
-          const std::uint8_t v = fg->at<std::uint8_t>(q);
-          if (v == 255 && object == nullptr) object = &o;
-          if (v == 0 && background == nullptr) background = &o;
-          if (object != nullptr && background != nullptr) break;
+  for (std::size_t s = 0; s < shots.size(); ++s) {
+    const cv::Mat& image = *shots[s].image;
+    const cv::Mat& first = *shots[s].alpha;
+    for (Tile& tile : tiles) {
+      const cv::Rect core = tile.core;
+      cv::Mat& result = tile.alpha[s];
+      const cv::Mat core_first = first(core);
+      if (cv::countNonZero((core_first > 0) & (core_first < 255)) == 0) {
+        result.release();
+        continue;
+      }
+      core_first.copyTo(result);
+      for (int y = 0; y < core.height; ++y) {
+        const auto* a = core_first.ptr<std::uint8_t>(y);
+        auto* out = result.ptr<std::uint8_t>(y);
+        for (int x = 0; x < core.width; ++x) {
+          if (a[x] == 0 || a[x] == 255) continue;
+          const cv::Point p(core.x + x, core.y + y);
+          // The nearest wholly object and wholly background pixels, searched nearest first.
+          const cv::Point* object = nullptr;
+          const cv::Point* background = nullptr;
+          for (const cv::Point& o : local) {
+            const cv::Point q = p + o;
+            if (!frame.contains(q)) continue;
+            const std::uint8_t v = first.at<std::uint8_t>(q);
+            if (v == 255 && object == nullptr) object = &o;
+            if (v == 0 && background == nullptr) background = &o;
+            if (object != nullptr && background != nullptr) break;
+          }
+          if (object == nullptr || background == nullptr) continue;
+          MatteAlpha(LinearPixel(image.at<cv::Vec3b>(p)),
+                     LinearPixel(image.at<cv::Vec3b>(p + *object)),
+                     LinearPixel(image.at<cv::Vec3b>(p + *background)), min_contrast,
+                     shots[s].third_colours, &out[x]);
         }
-        if (object == nullptr || background == nullptr) continue;
-        MatteAlpha(LinearPixel(image.at<cv::Vec3b>(p)),
-                   LinearPixel(image.at<cv::Vec3b>(p + *object)),
-                   LinearPixel(image.at<cv::Vec3b>(p + *background)), min_contrast,
-                   third_colours, &out[x]);
       }
     }
+    for (const Tile& tile : tiles)
+      if (!tile.alpha[s].empty()) tile.alpha[s].copyTo((*shots[s].alpha)(tile.core));
   }
-  for (const Tile& tile : tiles)
-    if (!tile.alpha.empty()) tile.alpha.copyTo((*fg)(tile.core));
 }
 
 }  // namespace
@@ -1778,11 +1812,10 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
       // The photo only where its colours are a mix of the two sides (whatever else shows
       // through an opening there, a shadow, the plate, is not the product's).
       cv::Mat in_photo = fg.clone();
-      RefineToAlpha(image, options, true, &fg);
-      RefineToAlpha(photo, options, false, &in_photo);
-      fg = cv::max(fg, in_photo);
+      RefineToAlpha({{&image, true, &fg}, {&photo, false, &in_photo}}, options);
+      cv::max(fg, in_photo, fg);
     } else {
-      RefineToAlpha(image, options, true, &fg);
+      RefineToAlpha({{&image, true, &fg}}, options);
     }
   }
   if (stats != nullptr) {
