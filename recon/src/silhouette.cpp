@@ -676,10 +676,12 @@ void IteratedGraphCut(const cv::Mat& image, int iterations, cv::Mat* labels) {
 // resolution, on the region around the candidates. `candidates` (CV_8UC1, 255 = not the expected
 // backdrop) seeds it: a candidate whose colour is also one of the border band's is probably
 // background (cloth, a stand), the others probably object; the border band is background. Returns
-// the full-size binary mask (255 = object).
+// the full-size binary mask (255 = object), and in *grid_step the graph cut's pixel in the
+// image's.
 cv::Mat SegmentByGraphCut(const cv::Mat& image, const cv::Mat& candidates,
                           const ExpectedBackground& expected, const SilhouetteOptions& options,
-                          const cv::Mat& prior, const std::string& name, double* largest_piece) {
+                          const cv::Mat& prior, const std::string& name, double* largest_piece,
+                          double* grid_step) {
   const cv::Size full = image.size();
   // The region: the candidates' pieces that matter (and what the other views say is object),
   // with a margin.
@@ -706,6 +708,7 @@ cv::Mat SegmentByGraphCut(const cv::Mat& image, const cv::Mat& candidates,
         cv::Rect(cv::Point(0, 0), full);
   const double scale =
       std::min(1.0, static_cast<double>(kGraphCutSize) / std::max(roi.width, roi.height));
+  *grid_step = 1.0 / scale;
   const int band_full = BorderBand(full);
   // Border colours, sampled at full resolution (every band pixel when the object must stay
   // clear of the border; otherwise only where the smooth backdrop model holds).
@@ -1044,14 +1047,17 @@ struct MatteShot {
 // beyond it, and where a side has no sure pixel within it (a part thinner than the band) the
 // binary mask stays. Each pass reads the mask as the previous one left it: the tiles' results
 // are kept aside and written when the pass is done. Several shots of one outline (the same
-// binary silhouette) share the band and where its nearest sure pixels lie.
-void RefineToAlpha(const std::vector<MatteShot>& shots, const SilhouetteOptions& options) {
+// binary silhouette) share the band and where its nearest sure pixels lie. `grid_step`: the
+// pixel the binary silhouette was decided on, in the photo's.
+void RefineToAlpha(const std::vector<MatteShot>& shots, const SilhouetteOptions& options,
+                   double grid_step) {
   const cv::Mat& binary = *shots.front().alpha;  // unchanged until the first pass is done
   const cv::Size size = binary.size();
-  // The band covers the graph cut's working-resolution step.
-  const int band =
-      1 +
-      static_cast<int>(std::ceil(std::max(size.width, size.height) / (kGraphCutSize * 1.0) * 0.5));
+  // The band covers half the segmentation's pixel (`grid_step`, photo pixels) with a pixel to
+  // spare either side, and never more than half a graph cut's pixel over the whole photo.
+  const int band = std::min(1 + static_cast<int>(std::ceil(std::max(size.width, size.height) /
+                                                           (kGraphCutSize * 1.0) * 0.5)),
+                            2 + static_cast<int>(std::ceil(0.5 * grid_step)));
   const int pad = 2 * band + 2;
   const cv::Rect frame(0, 0, size.width, size.height);
   cv::Rect roi = cv::boundingRect(binary);
@@ -1341,7 +1347,7 @@ cv::Mat AreaReduced(const cv::Mat& image, cv::Size size) {
 cv::Mat SegmentAtWorkingSize(const cv::Mat& image, const CameraModel& camera,
                              const SilhouetteOptions& options, double rim_px,
                              const cv::Mat& background, const std::string& name,
-                             SilhouetteStats* stats, const cv::Mat& prior) {
+                             SilhouetteStats* stats, const cv::Mat& prior, double* grid_step) {
   const bool difference = options.method == SilhouetteMethod::kDifference;
   const int width = image.cols;
   const int height = image.rows;
@@ -1465,7 +1471,7 @@ cv::Mat SegmentAtWorkingSize(const cv::Mat& image, const CameraModel& camera,
   };
   double largest = 0.0;
   const cv::Mat backdrop_colour = fg == 0;  // what the colour test took for the background
-  fg = SegmentByGraphCut(image, fg, expected, options, prior, name, &largest);
+  fg = SegmentByGraphCut(image, fg, expected, options, prior, name, &largest, grid_step);
   RemoveSmallComponents(&fg, options.min_component_fraction, &components);
   const double object_area = cv::countNonZero(fg);
   if (options.check_border && prior.empty()) {
@@ -1781,6 +1787,8 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
   double work_scale = std::min(1.0, std::sqrt(kWorkPixels / static_cast<double>(image.total())));
   if (const long factor = std::lround(1.0 / work_scale); factor >= 2) work_scale = 1.0 / factor;
   cv::Mat fg;
+  // The segmentation's pixel, in the working copy's (the graph cut decides on a coarser grid).
+  double grid_step = 1.0;
   if (work_scale < 1.0) {
     const CameraModel work_camera = camera.Scaled(work_scale);
     const cv::Size work_size(work_camera.width, work_camera.height);
@@ -1792,7 +1800,7 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
         backlit ? SegmentBacklitAtWorkingSize(work_image, options, name, stats, work_prior)
                 : SegmentAtWorkingSize(work_image, work_camera, options,
                                        options.plate_rim_px * work_scale, work_background, name,
-                                       stats, work_prior);
+                                       stats, work_prior, &grid_step);
     cv::resize(work_fg, fg, image.size(), 0, 0, cv::INTER_LINEAR);
     cv::threshold(fg, fg, 127, 255, cv::THRESH_BINARY);
   } else {
@@ -1801,7 +1809,7 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
       cv::resize(prior, full_prior, image.size(), 0, 0, cv::INTER_NEAREST);
     fg = backlit ? SegmentBacklitAtWorkingSize(image, options, name, stats, full_prior)
                  : SegmentAtWorkingSize(image, camera, options, options.plate_rim_px, background,
-                                        name, stats, full_prior);
+                                        name, stats, full_prior, &grid_step);
   }
   if (options.refine_boundary) {
     if (backlit && !photo.empty()) {
@@ -1812,10 +1820,11 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
       // The photo only where its colours are a mix of the two sides (whatever else shows
       // through an opening there, a shadow, the plate, is not the product's).
       cv::Mat in_photo = fg.clone();
-      RefineToAlpha({{&image, true, &fg}, {&photo, false, &in_photo}}, options);
+      RefineToAlpha({{&image, true, &fg}, {&photo, false, &in_photo}}, options,
+                    grid_step / work_scale);
       cv::max(fg, in_photo, fg);
     } else {
-      RefineToAlpha({{&image, true, &fg}}, options);
+      RefineToAlpha({{&image, true, &fg}}, options, grid_step / work_scale);
     }
   }
   if (stats != nullptr) {

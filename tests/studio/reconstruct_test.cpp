@@ -159,8 +159,7 @@ TEST(ReconstructTest, GivenMasksAreUsedAndADamagedOneIsRepairedByTheOtherViews) 
   // of the hole's 6,625 px restored, no pixel added or lost elsewhere, IoU 0.978-0.982 against
   // the intact mask (0.883 damaged).
   const cv::Mat object = intact >= 128;
-  const cv::Mat hole =
-      object & (ReadMask(dir / "given" / session.views[damaged].given_mask) < 128);
+  const cv::Mat hole = object & (ReadMask(dir / "given" / session.views[damaged].given_mask) < 128);
   const cv::Mat restored = repaired >= 128;
   EXPECT_GE(cv::countNonZero(hole & restored), 0.75 * cv::countNonZero(hole));
   EXPECT_LE(cv::countNonZero((restored != object) & ~hole), 0.002 * cv::countNonZero(object));
