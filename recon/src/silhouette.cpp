@@ -916,60 +916,54 @@ cv::Mat ColourAt(const cv::Mat& colour, const cv::Mat& at) {
   return out;
 }
 
-// An 8-bit sRGB level as linear light (0..255 scale).
-// From a table interpolated linearly (within 0.01 of a level; the backlit shot needs it for
-// every pixel).
-float LinearLevel(float srgb) {
-  constexpr int kSteps = 4096;
-  static const std::array<float, kSteps + 1> table = [] {
-    std::array<float, kSteps + 1> t{};
-    for (int i = 0; i <= kSteps; ++i) {
-      const double c = static_cast<double>(i) / kSteps;
-      t[static_cast<std::size_t>(i)] = static_cast<float>(
-          255.0 * (c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4)));
-    }
-    return t;
-  }();
-  const float at = std::clamp(srgb / 255.0f, 0.0f, 1.0f) * kSteps;
-  const int i = std::min(static_cast<int>(at), kSteps - 1);
-  const float f = at - static_cast<float>(i);
-  return table[static_cast<std::size_t>(i)] * (1.0f - f) +
-         table[static_cast<std::size_t>(i) + 1] * f;
-}
-
-// Linear light (0..255 scale) back to sRGB codes (0..255), from a table interpolated
-// linearly (within 0.02 of a code; the matte's contrast test calls it for every band pixel).
-cv::Vec3f SrgbCode(const cv::Vec3f& linear) {
-  constexpr int kSteps = 4096;
-  static const std::array<float, kSteps + 1> table = [] {
-    std::array<float, kSteps + 1> t{};
-    for (int i = 0; i <= kSteps; ++i) {
-      const double l = static_cast<double>(i) / kSteps;
-      t[static_cast<std::size_t>(i)] = static_cast<float>(
-          255.0 * (l <= 0.0031308 ? 12.92 * l : 1.055 * std::pow(l, 1.0 / 2.4) - 0.055));
-    }
-    return t;
-  }();
-  cv::Vec3f code;
-  for (int c = 0; c < 3; ++c) {
-    const float at = std::clamp(linear[c] / 255.0f, 0.0f, 1.0f) * kSteps;
+// A curve on [0, 1] tabulated at 4096 steps and interpolated linearly (within 0.0001 of the
+// sRGB curves): the matte and the backlit shot evaluate one per pixel.
+class TabulatedCurve {
+ public:
+  explicit TabulatedCurve(double (*curve)(double)) {
+    for (int i = 0; i <= kSteps; ++i)
+      table_[static_cast<std::size_t>(i)] =
+          static_cast<float>(curve(static_cast<double>(i) / kSteps));
+  }
+  float operator()(float x) const {
+    const float at = std::clamp(x, 0.0f, 1.0f) * kSteps;
     const int i = std::min(static_cast<int>(at), kSteps - 1);
     const float f = at - static_cast<float>(i);
-    code[c] = table[static_cast<std::size_t>(i)] * (1.0f - f) +
-              table[static_cast<std::size_t>(i) + 1] * f;
+    return table_[static_cast<std::size_t>(i)] * (1.0f - f) +
+           table_[static_cast<std::size_t>(i) + 1] * f;
   }
-  return code;
+
+ private:
+  static constexpr int kSteps = 4096;
+  std::array<float, kSteps + 1> table_{};
+};
+
+double SrgbToLinear(double c) {
+  return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4);
+}
+double LinearToSrgb(double l) {
+  return l <= 0.0031308 ? 12.92 * l : 1.055 * std::pow(l, 1.0 / 2.4) - 0.055;
+}
+
+// An 8-bit sRGB level as linear light (0..255 scale).
+float LinearLevel(float srgb) {
+  static const TabulatedCurve curve(SrgbToLinear);
+  return 255.0f * curve(srgb / 255.0f);
+}
+
+// Linear light (0..255 scale) back to sRGB codes (0..255).
+cv::Vec3f SrgbCode(const cv::Vec3f& linear) {
+  static const TabulatedCurve curve(LinearToSrgb);
+  return {255.0f * curve(linear[0] / 255.0f), 255.0f * curve(linear[1] / 255.0f),
+          255.0f * curve(linear[2] / 255.0f)};
 }
 
 // The 8-bit sRGB levels as linear light (0..255 scale).
 const std::array<float, 256>& LinearTable() {
   static const std::array<float, 256> table = [] {
     std::array<float, 256> t{};
-    for (int i = 0; i < 256; ++i) {
-      const double c = i / 255.0;
-      t[static_cast<std::size_t>(i)] = static_cast<float>(
-          255.0 * (c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4)));
-    }
+    for (int i = 0; i < 256; ++i)
+      t[static_cast<std::size_t>(i)] = static_cast<float>(255.0 * SrgbToLinear(i / 255.0));
     return t;
   }();
   return table;
