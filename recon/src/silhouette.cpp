@@ -597,8 +597,38 @@ void IteratedGraphCut(const cv::Mat& image, int iterations, cv::Mat* labels) {
     mixtures[side].Learn(samples[side],
                          std::vector<int>(assignment.begin<int>(), assignment.end<int>()));
   }
-  std::vector<double> source(static_cast<std::size_t>(undecided));
-  std::vector<double> sink(static_cast<std::size_t>(undecided));
+  // The links, the same in every iteration (only undecided pixels change side): between two
+  // undecided pixels an edge; to a sure one, its weight is added to that terminal's (cutting it
+  // costs w when the undecided pixel takes the other side; source = object). Both directions
+  // of every neighbour pair once: the pair's later pixel looks back.
+  struct Link {
+    int here, there;
+    double weight;
+  };
+  std::vector<Link> links;
+  std::vector<double> to_object(static_cast<std::size_t>(undecided), 0.0);
+  std::vector<double> to_background(static_cast<std::size_t>(undecided), 0.0);
+  for (int y = 0; y < rows; ++y) {
+    for (int x = 0; x < cols; ++x) {
+      const int here = index.at<int>(y, x);
+      for (const auto& d : kBefore) {
+        const int ny = y + d[0];
+        const int nx = x + d[1];
+        if (ny < 0 || nx < 0 || nx >= cols) continue;
+        const int there = index.at<int>(ny, nx);
+        if (here < 0 && there < 0) continue;  // both sure: no say in the cut
+        const double w = smoothness(y, x, ny, nx);
+        if (here >= 0 && there >= 0) {
+          links.push_back({here, there, w});
+          continue;
+        }
+        const auto open = static_cast<std::size_t>(here >= 0 ? here : there);
+        const std::uint8_t sure =
+            here >= 0 ? labels->at<std::uint8_t>(ny, nx) : labels->at<std::uint8_t>(y, x);
+        (sure == cv::GC_FGD ? to_object : to_background)[open] += w;
+      }
+    }
+  }
   for (int iteration = 0; iteration < iterations; ++iteration) {
     if (iteration > 0) {
       for (int side = 0; side < 2; ++side) {
@@ -616,51 +646,22 @@ void IteratedGraphCut(const cv::Mat& image, int iterations, cv::Mat* labels) {
       }
       mixtures[side].Learn(samples[side], component);
     }
-    // The graph: the undecided pixels, their links to each other and, for a link to a sure
-    // pixel, its weight added to that terminal's.
+    // The graph: the undecided pixels with their colours' costs on either side, and the links.
     cv::detail::GCGraph<double> graph(static_cast<unsigned>(undecided),
-                                      static_cast<unsigned>(8 * undecided));
+                                      static_cast<unsigned>(2 * links.size()));
     for (int y = 0; y < rows; ++y) {
       const auto* i = index.ptr<int>(y);
       for (int x = 0; x < cols; ++x) {
         if (i[x] < 0) continue;
         const Eigen::Vector3d c = colour(y, x);
         const auto v = static_cast<std::size_t>(i[x]);
-        source[v] = -std::log(std::max(mixtures[0].Density(c), 1e-300));
-        sink[v] = -std::log(std::max(mixtures[1].Density(c), 1e-300));
         graph.addVtx();
+        graph.addTermWeights(
+            i[x], -std::log(std::max(mixtures[0].Density(c), 1e-300)) + to_object[v],
+            -std::log(std::max(mixtures[1].Density(c), 1e-300)) + to_background[v]);
       }
     }
-    // Both directions of every neighbour pair once: the pair's later pixel looks back.
-    for (int y = 0; y < rows; ++y) {
-      for (int x = 0; x < cols; ++x) {
-        const int here = index.at<int>(y, x);
-        const std::uint8_t here_label = labels->at<std::uint8_t>(y, x);
-        for (const auto& d : kBefore) {
-          const int ny = y + d[0];
-          const int nx = x + d[1];
-          if (ny < 0 || nx < 0 || nx >= cols) continue;
-          const int there = index.at<int>(ny, nx);
-          if (here < 0 && there < 0) continue;  // both sure: no say in the cut
-          const double w = smoothness(y, x, ny, nx);
-          if (here >= 0 && there >= 0) {
-            graph.addEdges(here, there, w, w);
-            continue;
-          }
-          // One side sure: cutting the link costs w when the undecided pixel takes the other
-          // side (source = object).
-          const int open = here >= 0 ? here : there;
-          const std::uint8_t sure = here >= 0 ? labels->at<std::uint8_t>(ny, nx) : here_label;
-          if (sure == cv::GC_FGD)
-            source[static_cast<std::size_t>(open)] += w;
-          else
-            sink[static_cast<std::size_t>(open)] += w;
-        }
-      }
-    }
-    for (int v = 0; v < undecided; ++v)
-      graph.addTermWeights(v, source[static_cast<std::size_t>(v)],
-                           sink[static_cast<std::size_t>(v)]);
+    for (const Link& link : links) graph.addEdges(link.here, link.there, link.weight, link.weight);
     graph.maxFlow();
     for (int y = 0; y < rows; ++y) {
       const auto* i = index.ptr<int>(y);
