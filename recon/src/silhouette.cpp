@@ -1043,9 +1043,10 @@ struct MatteShot {
 // binary mask stays. Each pass reads the mask as the previous one left it: the tiles' results
 // are kept aside and written when the pass is done. Several shots of one outline (the same
 // binary silhouette) share the band and where its nearest sure pixels lie. `grid_step`: the
-// pixel the binary silhouette was decided on, in the photo's.
-void RefineToAlpha(const std::vector<MatteShot>& shots, const SilhouetteOptions& options,
-                   double grid_step) {
+// pixel the binary silhouette was decided on, in the photo's; `box`: the binary silhouette's
+// bounding box. Returns the box the mattes may differ from it in.
+cv::Rect RefineToAlpha(const std::vector<MatteShot>& shots, const SilhouetteOptions& options,
+                       double grid_step, cv::Rect box) {
   const cv::Mat& binary = *shots.front().alpha;  // unchanged until the first pass is done
   const cv::Size size = binary.size();
   // The band covers half the segmentation's pixel (`grid_step`, photo pixels) with a pixel to
@@ -1055,9 +1056,9 @@ void RefineToAlpha(const std::vector<MatteShot>& shots, const SilhouetteOptions&
                             2 + static_cast<int>(std::ceil(0.5 * grid_step)));
   const int pad = 2 * band + 2;
   const cv::Rect frame(0, 0, size.width, size.height);
-  cv::Rect roi = cv::boundingRect(binary);
-  if (roi.area() == 0) return;
-  roi = cv::Rect(roi.x - pad, roi.y - pad, roi.width + 2 * pad, roi.height + 2 * pad) & frame;
+  if (box.area() == 0) return {};
+  const cv::Rect roi =
+      cv::Rect(box.x - pad, box.y - pad, box.width + 2 * pad, box.height + 2 * pad) & frame;
   const double min_contrast = 2.0 * std::max(options.noise_threshold, 4.0);
   constexpr int kTile = 64;
   struct Tile {
@@ -1196,6 +1197,7 @@ void RefineToAlpha(const std::vector<MatteShot>& shots, const SilhouetteOptions&
     for (const Tile& tile : tiles)
       if (!tile.alpha[s].empty()) tile.alpha[s].copyTo((*shots[s].alpha)(tile.core));
   }
+  return roi;
 }
 
 }  // namespace
@@ -1316,6 +1318,35 @@ void SilhouetteOptions::Validate() const {
 }
 
 namespace {
+
+// A working copy's binary silhouette (CV_8UC1, 0 or 255) at the photo's `size`: interpolated
+// linearly and thresholded at half; *box receives the result's bounding box. Where `size` is
+// the working size times an integer, only the silhouette's bounding box (with the pixel either
+// side the interpolation reads) is upsampled: the same pixels as upsampling the whole, for the
+// part of an 18-Mpx photo the object covers.
+cv::Mat Upsampled(const cv::Mat& small, cv::Size size, cv::Rect* box) {
+  cv::Mat out;
+  const int factor = size.width / small.cols;
+  const cv::Rect small_box = cv::boundingRect(small);
+  if (factor < 2 || small.cols * factor != size.width || small.rows * factor != size.height ||
+      small_box.area() == 0) {
+    cv::resize(small, out, size, 0, 0, cv::INTER_LINEAR);
+    cv::threshold(out, out, 127, 255, cv::THRESH_BINARY);
+    *box = cv::boundingRect(out);
+    return out;
+  }
+  const cv::Rect read =
+      cv::Rect(small_box.x - 1, small_box.y - 1, small_box.width + 2, small_box.height + 2) &
+      cv::Rect(0, 0, small.cols, small.rows);
+  const cv::Rect written(read.x * factor, read.y * factor, read.width * factor,
+                         read.height * factor);
+  out = cv::Mat::zeros(size, CV_8UC1);
+  cv::Mat part = out(written);
+  cv::resize(small(read), part, written.size(), 0, 0, cv::INTER_LINEAR);
+  cv::threshold(part, part, 127, 255, cv::THRESH_BINARY);
+  *box = cv::boundingRect(part) + written.tl();
+  return out;
+}
 
 // `image` averaged down to `size` by area. By an even integer factor in steps of 2: OpenCV's
 // 2x2 area average is vectorised, its 4x4 is not (18 -> 8 ms on an 18-Mpx photo); the result
@@ -1467,8 +1498,14 @@ cv::Mat SegmentAtWorkingSize(const cv::Mat& image, const CameraModel& camera,
   double largest = 0.0;
   const cv::Mat backdrop_colour = fg == 0;  // what the colour test took for the background
   fg = SegmentByGraphCut(image, fg, expected, options, prior, name, &largest, grid_step);
-  RemoveSmallComponents(&fg, options.min_component_fraction, &components);
-  const double object_area = cv::countNonZero(fg);
+  // Pieces and holes are looked for within the object's box and a pixel of background around
+  // it (a hole that reaches the box's edge is open to the backdrop beyond).
+  const cv::Rect found = cv::boundingRect(fg);
+  const cv::Rect box = cv::Rect(found.x - 1, found.y - 1, found.width + 2, found.height + 2) &
+                       cv::Rect(0, 0, width, height);
+  cv::Mat fg_box = fg(box);
+  RemoveSmallComponents(&fg_box, options.min_component_fraction, &components);
+  const double object_area = cv::countNonZero(fg_box);
   if (options.check_border && prior.empty()) {
     // Candidates that reach the border, whose colours the border band shows, were all taken
     // for backdrop: when that leaves almost nothing of them, the object itself crosses the
@@ -1487,7 +1524,7 @@ cv::Mat SegmentAtWorkingSize(const cv::Mat& image, const CameraModel& camera,
     throw FormatError(name,
                       "no object found: the photo shows only the backdrop (or the object "
                       "matches it everywhere)");
-  FillSmallHoles(&fg, options.max_hole_fraction * object_area, backdrop_colour);
+  FillSmallHoles(&fg_box, options.max_hole_fraction * object_area, backdrop_colour(box));
   if (options.check_border) CheckClearOfBorder(fg, name);
   CheckExposure(image, fg, name);
   if (stats != nullptr) {
@@ -1597,17 +1634,22 @@ cv::Mat SegmentBacklitAtWorkingSize(const cv::Mat& image, const SilhouetteOption
                       "no object found: the mask shot shows only the lit panel (or the "
                       "product lets all of its light through)");
   // Holes the object encloses: a see-through part dims the panel behind it (filled: the
-  // product is solid there), an opening shows it as it is (kept).
+  // product is solid there), an opening shows it as it is (kept). Looked for within the
+  // object's box and a pixel of background around it (a hole that reaches the box's edge is
+  // open to the panel beyond).
   {
-    cv::Mat background = ~fg;
+    const cv::Rect found = cv::boundingRect(fg);
+    const cv::Rect box = cv::Rect(found.x - 1, found.y - 1, found.width + 2, found.height + 2) &
+                         cv::Rect(0, 0, width, height);
+    cv::Mat background = ~fg(box);
     cv::Mat labels, stats_mat, centroids;
     const int n =
         cv::connectedComponentsWithStats(background, labels, stats_mat, centroids, 4, CV_32S);
     std::vector<double> alpha_sum(static_cast<std::size_t>(n), 0.0);
-    for (int y = 0; y < height; ++y) {
+    for (int y = 0; y < box.height; ++y) {
       const int* l = labels.ptr<int>(y);
-      const float* a = alpha.ptr<float>(y);
-      for (int x = 0; x < width; ++x) alpha_sum[static_cast<std::size_t>(l[x])] += a[x];
+      const float* a = alpha.ptr<float>(box.y + y) + box.x;
+      for (int x = 0; x < box.width; ++x) alpha_sum[static_cast<std::size_t>(l[x])] += a[x];
     }
     std::vector<std::uint8_t> fill(static_cast<std::size_t>(n), 0);
     const double max_small = options.max_hole_fraction * object_area;
@@ -1616,16 +1658,16 @@ cv::Mat SegmentBacklitAtWorkingSize(const cv::Mat& image, const SilhouetteOption
       const int y = stats_mat.at<int>(i, cv::CC_STAT_TOP);
       const int w = stats_mat.at<int>(i, cv::CC_STAT_WIDTH);
       const int h = stats_mat.at<int>(i, cv::CC_STAT_HEIGHT);
-      if (x == 0 || y == 0 || x + w == width || y + h == height) continue;  // open backdrop
+      if (x == 0 || y == 0 || x + w == box.width || y + h == box.height) continue;  // open
       const double area = stats_mat.at<int>(i, cv::CC_STAT_AREA);
       const double mean_alpha = alpha_sum[static_cast<std::size_t>(i)] / area;
       if (area <= max_small || mean_alpha >= kSeeThroughAlpha)
         fill[static_cast<std::size_t>(i)] = 255;
     }
-    for (int y = 0; y < height; ++y) {
+    for (int y = 0; y < box.height; ++y) {
       const int* l = labels.ptr<int>(y);
-      std::uint8_t* m = fg.ptr<std::uint8_t>(y);
-      for (int x = 0; x < width; ++x)
+      std::uint8_t* m = fg.ptr<std::uint8_t>(box.y + y) + box.x;
+      for (int x = 0; x < box.width; ++x)
         m[x] = static_cast<std::uint8_t>(m[x] | fill[static_cast<std::size_t>(l[x])]);
     }
   }
@@ -1782,6 +1824,7 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
   double work_scale = std::min(1.0, std::sqrt(kWorkPixels / static_cast<double>(image.total())));
   if (const long factor = std::lround(1.0 / work_scale); factor >= 2) work_scale = 1.0 / factor;
   cv::Mat fg;
+  cv::Rect box;  // the silhouette's bounding box, once known
   // The segmentation's pixel, in the working copy's (the graph cut decides on a coarser grid).
   double grid_step = 1.0;
   if (work_scale < 1.0) {
@@ -1796,8 +1839,7 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
                 : SegmentAtWorkingSize(work_image, work_camera, options,
                                        options.plate_rim_px * work_scale, work_background, name,
                                        stats, work_prior, &grid_step);
-    cv::resize(work_fg, fg, image.size(), 0, 0, cv::INTER_LINEAR);
-    cv::threshold(fg, fg, 127, 255, cv::THRESH_BINARY);
+    fg = Upsampled(work_fg, image.size(), &box);
   } else {
     cv::Mat full_prior = prior;
     if (!prior.empty() && prior.size() != image.size())
@@ -1805,6 +1847,7 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
     fg = backlit ? SegmentBacklitAtWorkingSize(image, options, name, stats, full_prior)
                  : SegmentAtWorkingSize(image, camera, options, options.plate_rim_px, background,
                                         name, stats, full_prior, &grid_step);
+    box = cv::boundingRect(fg);
   }
   if (options.refine_boundary) {
     if (backlit && !photo.empty()) {
@@ -1815,18 +1858,22 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
       // The photo only where its colours are a mix of the two sides (whatever else shows
       // through an opening there, a shadow, the plate, is not the product's).
       cv::Mat in_photo = fg.clone();
-      RefineToAlpha({{&image, true, &fg}, {&photo, false, &in_photo}}, options,
-                    grid_step / work_scale);
-      cv::max(fg, in_photo, fg);
+      const cv::Rect changed = RefineToAlpha({{&image, true, &fg}, {&photo, false, &in_photo}},
+                                             options, grid_step / work_scale, box);
+      cv::Mat larger = fg(changed);
+      cv::max(larger, in_photo(changed), larger);
+      box |= changed;
     } else {
-      RefineToAlpha({{&image, true, &fg}}, options, grid_step / work_scale);
+      box |= RefineToAlpha({{&image, true, &fg}}, options, grid_step / work_scale, box);
     }
   }
   if (stats != nullptr) {
-    std::size_t object = 0;  // (counted in place: a comparison would write 18 MB)
-    for (int y = 0; y < fg.rows; ++y) {
+    // Counted in place, within the box (a comparison would write 18 MB).
+    std::size_t object = 0;
+    const cv::Rect counted = box;
+    for (int y = counted.y; y < counted.br().y; ++y) {
       const auto* m = fg.ptr<std::uint8_t>(y);
-      for (int x = 0; x < fg.cols; ++x) object += m[x] >= 128 ? 1 : 0;
+      for (int x = counted.x; x < counted.br().x; ++x) object += m[x] >= 128 ? 1 : 0;
     }
     stats->object_fraction = static_cast<double>(object) / static_cast<double>(fg.total());
   }
