@@ -5,6 +5,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <numeric>
 #include <sstream>
@@ -24,10 +25,14 @@ namespace {
 constexpr double kNearM = 1e-3;          // points closer to a camera are not projected
 constexpr double kFootprintSlack = 1.2;  // projected-radius safety factor (lens distortion)
 constexpr int kRootCells = 32;           // root grid cells along the longest side, at most
-constexpr int kConsistencyGrid = 48;
-constexpr int kPriorGrid = 96;         // cells per axis for the others' hull priors
-constexpr double kPriorSize = 1024.0;  // longest mask side the priors are computed at     // points
-                                       // per axis for the consistency check
+constexpr int kConsistencyGrid = 48;     // points per axis for the consistency check
+constexpr int kPriorGrid = 96;           // cells per axis for the others' hull priors
+// The priors' cells are decided a block of kPriorBlock^3 at a time first, with the block's
+// projected radius taken kPriorBlockSlack times larger (the projection curves).
+constexpr int kPriorBlock = 4;
+constexpr double kPriorBlockSlack = 1.25;
+static_assert(kPriorGrid % kPriorBlock == 0);
+constexpr double kPriorSize = 1024.0;  // longest mask side the priors are computed at
 
 // Signed distance to the silhouette boundary in pixels, positive inside, over a crop of the
 // image around the silhouette; outside the crop a lower bound of the true (negative) distance.
@@ -124,6 +129,58 @@ struct ViewData {
     focal_max = std::max(c.fx, c.fy);
     focal_mean = 0.5 * (c.fx + c.fy);
   }
+};
+
+// Filled discs drawn as cv::circle draws them (8-connected, integer centre and radius), from
+// each radius's row spans, found once by drawing one: the priors draw hundreds of thousands of
+// discs a few pixels wide, for which cv::circle's per-call overhead is most of the time.
+class DiscSpans {
+ public:
+  // Sets the pixels of a filled disc at `centre` of `radius` to 255 in `image` (CV_8UC1).
+  void Fill(cv::Mat& image, cv::Point centre, int radius) {
+    if (radius < 0 || radius > kMaxCached) {
+      cv::circle(image, centre, radius, cv::Scalar(255), cv::FILLED);
+      return;
+    }
+    const std::vector<cv::Vec2i>& spans = Spans(radius);
+    const int top = centre.y - radius;
+    const int first = std::max(0, -top);
+    const int last = std::min(static_cast<int>(spans.size()), image.rows - top);
+    for (int row = first; row < last; ++row) {
+      const int x0 = std::max(0, centre.x + spans[static_cast<std::size_t>(row)][0]);
+      const int x1 = std::min(image.cols - 1, centre.x + spans[static_cast<std::size_t>(row)][1]);
+      if (x0 <= x1)
+        std::memset(image.ptr<std::uint8_t>(top + row) + x0, 255,
+                    static_cast<std::size_t>(x1 - x0 + 1));
+    }
+  }
+
+ private:
+  static constexpr int kMaxCached = 64;
+
+  // Per row from the top, the first and last column offsets (first > last: none).
+  const std::vector<cv::Vec2i>& Spans(int radius) {
+    if (spans_.size() <= static_cast<std::size_t>(radius)) spans_.resize(radius + 1);
+    std::vector<cv::Vec2i>& spans = spans_[static_cast<std::size_t>(radius)];
+    if (!spans.empty()) return spans;
+    const int side = 2 * radius + 3;
+    cv::Mat disc(side, side, CV_8UC1, cv::Scalar(0));
+    const cv::Point centre(radius + 1, radius + 1);
+    cv::circle(disc, centre, radius, cv::Scalar(255), cv::FILLED);
+    for (int y = centre.y - radius; y <= centre.y + radius; ++y) {
+      cv::Vec2i span(1, 0);
+      const auto* row = disc.ptr<std::uint8_t>(y);
+      for (int x = 0; x < side; ++x) {
+        if (!row[x]) continue;
+        if (span[0] > span[1]) span[0] = x - centre.x;
+        span[1] = x - centre.x;
+      }
+      spans.push_back(span);
+    }
+    return spans;
+  }
+
+  std::vector<std::vector<cv::Vec2i>> spans_;
 };
 
 enum class CellClass { kOut, kIn, kAmbiguous };
@@ -871,11 +928,58 @@ std::vector<cv::Mat> OthersHullPriors(const std::vector<View>& views,
   // Per cell, the view it fails when it fails one: a cell failing two is outside every other
   // view's hull anyway.
   std::vector<std::int16_t> only_outside(cells, -1), only_not_inside(cells, -1);
+  // First per block of cells and view: wholly outside (each of its cells is), wholly inside
+  // (none of its cells is outside or on the outline), or to be looked at cell by cell (it
+  // straddles the outline, lies off the photo or too near the camera). Most of the grid is
+  // decided here.
+  enum BlockState : std::uint8_t { kStraddles, kBlockOutside, kBlockInside };
+  const int blocks_per_axis = cells_per_axis / kPriorBlock;
+  const std::size_t blocks =
+      static_cast<std::size_t>(blocks_per_axis) * blocks_per_axis * blocks_per_axis;
+  const double block_rho = kPriorBlockSlack * kPriorBlock * rho;
+  std::vector<std::uint8_t> block_state(blocks * n, kStraddles);
+  ParallelFor(blocks, 64, threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t b = begin; b < end; ++b) {
+      const std::size_t bi = b % blocks_per_axis;
+      const std::size_t bj = (b / blocks_per_axis) % blocks_per_axis;
+      const std::size_t bk = b / (static_cast<std::size_t>(blocks_per_axis) * blocks_per_axis);
+      const Eigen::Vector3d x =
+          region.min() + kPriorBlock * step.cwiseProduct(Eigen::Vector3d(
+                                           bi + 0.5, bj + 0.5, static_cast<double>(bk) + 0.5));
+      for (std::size_t v = 0; v < n; ++v) {
+        const ViewData& d = data[v];
+        const Eigen::Vector3d p = d.rotation * x + d.translation;
+        if (p.z() - block_rho <= kNearM) continue;
+        const Eigen::Vector2d pixel = d.camera->ProjectFromCam(p);
+        const double r = d.focal_max * block_rho / (p.z() - block_rho) + 1.0;
+        const DistanceMap& dm = *d.distance;
+        if (!dm.InImage(pixel.x(), pixel.y(), r)) continue;
+        const double sd = dm.At(pixel.x(), pixel.y());
+        if (sd < -r) block_state[b * n + v] = kBlockOutside;
+        if (sd > r) block_state[b * n + v] = kBlockInside;
+      }
+    }
+  });
   ParallelFor(cells, 4096, threads, [&](std::size_t begin, std::size_t end) {
     for (std::size_t c = begin; c < end; ++c) {
       const Eigen::Vector3d x = cell_centre(c);
+      const std::size_t i = c % cells_per_axis;
+      const std::size_t j = (c / cells_per_axis) % cells_per_axis;
+      const std::size_t k = c / (static_cast<std::size_t>(cells_per_axis) * cells_per_axis);
+      const std::size_t b =
+          (i / kPriorBlock) +
+          blocks_per_axis * ((j / kPriorBlock) + blocks_per_axis * (k / kPriorBlock));
+      const std::uint8_t* decided = &block_state[b * n];
       // Once two views carve the cell it is outside every view's others' hull.
       for (std::size_t v = 0; v < n && outside[c] < 2; ++v) {
+        if (decided[v] == kBlockInside) continue;
+        if (decided[v] == kBlockOutside) {
+          ++outside[c];
+          only_outside[c] = static_cast<std::int16_t>(v);
+          ++not_inside[c];
+          only_not_inside[c] = static_cast<std::int16_t>(v);
+          continue;
+        }
         const ViewData& d = data[v];
         const Eigen::Vector3d p = d.rotation * x + d.translation;
         if (p.z() - rho <= kNearM) continue;  // unknown
@@ -905,6 +1009,7 @@ std::vector<cv::Mat> OthersHullPriors(const std::vector<View>& views,
       cv::Mat is(may.size(), CV_8UC1, cv::Scalar(0));
       double footprint_sum = 0.0;
       int footprints = 0;
+      DiscSpans discs;
       const auto in_may = [&](std::size_t c) {
         return outside[c] == 0 || (outside[c] == 1 && only_outside[c] == static_cast<int>(v));
       };
@@ -933,11 +1038,10 @@ std::vector<cv::Mat> OthersHullPriors(const std::vector<View>& views,
         if (!surface && !in_is) continue;
         const Eigen::Vector2d pixel = d.camera->ProjectFromCam(p);
         const cv::Point centre(cvRound(pixel.x()), cvRound(pixel.y()));
-        if (surface)
-          cv::circle(may, centre, static_cast<int>(std::ceil(r_out)), cv::Scalar(255), cv::FILLED);
+        if (surface) discs.Fill(may, centre, static_cast<int>(std::ceil(r_out)));
         if (in_is) {
           const double r_in = d.focal_mean * inner / (p.z() + rho);
-          cv::circle(is, centre, std::max(1, static_cast<int>(r_in)), cv::Scalar(255), cv::FILLED);
+          discs.Fill(is, centre, std::max(1, static_cast<int>(r_in)));
         }
       }
       // Deep inside: a cell's footprint within the others' hull's inner region. Nearer the
