@@ -676,10 +676,14 @@ void IteratedGraphCut(const cv::Mat& image, int iterations, cv::Mat* labels) {
 // min-cut with a contrast-sensitive smoothness term; IteratedGraphCut), at a working
 // resolution, on the region around the candidates. `candidates` (CV_8UC1, 255 = not the expected
 // backdrop) seeds it: a candidate whose colour is also one of the border band's is probably
-// background (cloth, a stand), the others probably object; the border band is background. Returns
+// background (cloth, a stand), the others probably object; the border band is background. The
+// border's colours are not sampled where the expected colour is `unsure` (CV_8UC1, 255; may be
+// empty): in the plate's rim band, where the backdrop shows beside a plate that reaches the
+// frame's edge, the plate's expected colour would make the backdrop's white a border colour,
+// and a white sole on the plate backdrop. Returns
 // the full-size binary mask (255 = object), and in *grid_step the graph cut's pixel in the
 // image's.
-cv::Mat SegmentByGraphCut(const cv::Mat& image, const cv::Mat& candidates,
+cv::Mat SegmentByGraphCut(const cv::Mat& image, const cv::Mat& candidates, const cv::Mat& unsure,
                           const ExpectedBackground& expected, const SilhouetteOptions& options,
                           const cv::Mat& prior, const std::string& name, double* largest_piece,
                           double* grid_step) {
@@ -713,8 +717,9 @@ cv::Mat SegmentByGraphCut(const cv::Mat& image, const cv::Mat& candidates,
   const int band_full = BorderBand(full);
   // Border colours, sampled at full resolution (every band pixel when the object must stay
   // clear of the border; otherwise only where the smooth backdrop model holds).
-  const cv::Mat usable =
+  cv::Mat usable =
       options.check_border ? cv::Mat(full, CV_8UC1, cv::Scalar(255)) : cv::Mat(~candidates);
+  if (!unsure.empty()) usable.setTo(0, unsure);
   const BorderResiduals border(image, expected, usable, band_full);
 
   cv::Mat small, small_candidates;
@@ -1497,7 +1502,8 @@ cv::Mat SegmentAtWorkingSize(const cv::Mat& image, const CameraModel& camera,
   };
   double largest = 0.0;
   const cv::Mat backdrop_colour = fg == 0;  // what the colour test took for the background
-  fg = SegmentByGraphCut(image, fg, expected, options, prior, name, &largest, grid_step);
+  fg = SegmentByGraphCut(image, fg, have_plate ? rim : cv::Mat(), expected, options, prior, name,
+                         &largest, grid_step);
   // Pieces and holes are looked for within the object's box and a pixel of background around
   // it (a hole that reaches the box's edge is open to the backdrop beyond).
   const cv::Rect found = cv::boundingRect(fg);

@@ -37,16 +37,16 @@ const sim::SimViews& SimulatedCapture(const std::string& name) {
     return flags.find(wanted) != std::string::npos;
   };
   sim::Scene scene;
-  constexpr double kSize = 0.25;
+  const double product_size = flag("small") ? 0.12 : 0.25;
   int stops = 16;
   int width = 960;
   int height = 640;
   if (base == "ring") {
-    scene = sim::MakeRingScene(0.4 * kSize, 0.1 * kSize);
+    scene = sim::MakeRingScene(0.4 * product_size, 0.1 * product_size);
   } else if (base == "sphere") {
-    scene = sim::MakeSphereScene(0.5 * kSize, {0.0, 0.0, 0.5 * kSize}, 5);
+    scene = sim::MakeSphereScene(0.5 * product_size, {0.0, 0.0, 0.5 * product_size}, 5);
   } else if (base == "mug") {
-    scene = sim::MakeMugScene(0.6 * kSize);
+    scene = sim::MakeMugScene(0.6 * product_size);
     stops = 12;
     width = 1296;
     height = 864;
@@ -62,7 +62,7 @@ const sim::SimViews& SimulatedCapture(const std::string& name) {
     scene = sim::LoadScene(carousel::testing::SharedDataFile(file));
     sim::PlaceOnTurntable(scene, {.scale = 1.0});
     const Eigen::Vector3d size = scene.Bounds().sizes();
-    sim::PlaceOnTurntable(scene, {.target_height_m = size.z() * kSize / size.maxCoeff()});
+    sim::PlaceOnTurntable(scene, {.target_height_m = size.z() * product_size / size.maxCoeff()});
     stops = 12;  // and larger photos: thin parts (laces, the heel tab) need the pixels
     width = 1296;
     height = 864;

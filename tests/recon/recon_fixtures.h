@@ -17,7 +17,9 @@ namespace carousel::recon::testing {
 // joined by '+': "shadow" a contact shadow on the plate; "studio" what a real studio shows
 // (the key light's soft cast shadow on the plate and the sweep, the backdrop light's falloff,
 // lens vignetting) with 3 x 3 samples per pixel (no pixel is exactly half covered, so the
-// truth has no ties); "backlit" a backlit mask shot beside every photo.
+// truth has no ties); "backlit" a backlit mask shot beside every photo; "small" a product of
+// 12 cm instead of 25 (framed as tightly: the plate then fills the frame's lower half and
+// reaches its border).
 const sim::SimViews& SimulatedCapture(const std::string& scene);
 
 }  // namespace carousel::recon::testing

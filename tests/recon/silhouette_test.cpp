@@ -30,7 +30,9 @@ class SilhouetteOnScene
     : public ::testing::TestWithParam<std::pair<std::string, SilhouetteMethod>> {};
 
 // The issue's bound: IoU >= 0.99 against the exact silhouette on every view, with sensor noise
-// and JPEG, for keying and for background differencing; the plate never counts as object.
+// and JPEG, for keying and for background differencing; the plate never counts as object. A
+// small product framed as tightly: the plate reaches the frame's border beside the backdrop
+// (its white sole was taken for the backdrop: IoU 0.73).
 TEST_P(SilhouetteOnScene, EveryViewMatchesTheTruth) {
   const auto& [scene, method] = GetParam();
   const sim::SimViews& capture = testing::SimulatedCapture(scene);
@@ -52,11 +54,16 @@ INSTANTIATE_TEST_SUITE_P(Scenes, SilhouetteOnScene,
                                            std::make_pair("bottle", SilhouetteMethod::kKey),
                                            std::make_pair("ring", SilhouetteMethod::kKey),
                                            std::make_pair("duck", SilhouetteMethod::kKey),
+                                           std::make_pair("shoe/none/light/small",
+                                                          SilhouetteMethod::kKey),
                                            std::make_pair("shoe", SilhouetteMethod::kDifference),
                                            std::make_pair("bottle", SilhouetteMethod::kDifference)),
                          [](const auto& param_info) {
-                           return param_info.param.first + "_" +
-                                  SilhouetteMethodName(param_info.param.second);
+                           std::string name = param_info.param.first + "_" +
+                                              SilhouetteMethodName(param_info.param.second);
+                           for (char& c : name)
+                             if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
+                           return name;
                          });
 
 // Hard products (issue 20), in a studio as real ones are (the key light's soft cast shadow on
