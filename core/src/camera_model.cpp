@@ -8,12 +8,6 @@
 
 namespace carousel {
 
-Eigen::Vector2d Distortion::Apply(const Eigen::Vector2d& xy) const {
-  Eigen::Vector2d distorted;
-  DistortNormalized(k1, k2, p1, p2, k3, xy.x(), xy.y(), &distorted.x(), &distorted.y());
-  return distorted;
-}
-
 Eigen::Vector2d Distortion::Apply(const Eigen::Vector2d& xy, Eigen::Matrix2d* jacobian) const {
   const double x = xy.x();
   const double y = xy.y();
@@ -89,15 +83,6 @@ std::optional<Eigen::Vector2d> CameraModel::Project(const Eigen::Vector3d& point
   const Eigen::Vector3d point_cam = cam_from_world * point_world;
   if (!(point_cam.z() > 0.0)) return std::nullopt;
   return ProjectFromCam(point_cam);
-}
-
-Eigen::Vector2d CameraModel::ProjectFromCam(const Eigen::Vector3d& point_cam) const {
-  return PixelFromNormalized(point_cam.head<2>() / point_cam.z());
-}
-
-Eigen::Vector2d CameraModel::PixelFromNormalized(const Eigen::Vector2d& xy) const {
-  const Eigen::Vector2d distorted = distortion.Apply(xy);
-  return {fx * distorted.x() + cx, fy * distorted.y() + cy};
 }
 
 std::optional<Eigen::Vector2d> CameraModel::NormalizedFromPixel(

@@ -149,14 +149,30 @@ class DiscSpans {
     for (int row = first; row < last; ++row) {
       const int x0 = std::max(0, centre.x + spans[static_cast<std::size_t>(row)][0]);
       const int x1 = std::min(image.cols - 1, centre.x + spans[static_cast<std::size_t>(row)][1]);
-      if (x0 <= x1)
-        std::memset(image.ptr<std::uint8_t>(top + row) + x0, 255,
-                    static_cast<std::size_t>(x1 - x0 + 1));
+      if (x0 <= x1) SetRun(image.ptr<std::uint8_t>(top + row) + x0, x1 - x0 + 1);
     }
   }
 
  private:
   static constexpr int kMaxCached = 64;
+
+  // Sets `width` (>= 1) bytes at `at` to 255: a disc's rows are a few bytes, for which two
+  // overlapping word stores beat a call to memset.
+  static void SetRun(std::uint8_t* at, int width) {
+    if (width > 16) {
+      std::memset(at, 255, static_cast<std::size_t>(width));
+    } else if (width >= 8) {
+      constexpr std::uint64_t kOnes = ~std::uint64_t{0};
+      std::memcpy(at, &kOnes, sizeof(kOnes));
+      std::memcpy(at + width - 8, &kOnes, sizeof(kOnes));
+    } else if (width >= 4) {
+      constexpr std::uint32_t kOnes = ~std::uint32_t{0};
+      std::memcpy(at, &kOnes, sizeof(kOnes));
+      std::memcpy(at + width - 4, &kOnes, sizeof(kOnes));
+    } else {
+      for (int i = 0; i < width; ++i) at[i] = 255;
+    }
+  }
 
   // Per row from the top, the first and last column offsets (first > last: none).
   const std::vector<cv::Vec2i>& Spans(int radius) {
@@ -1001,40 +1017,66 @@ std::vector<cv::Mat> OthersHullPriors(const std::vector<View>& views,
   });
   // Per view, the cells of the others' hull splatted into its image: grown (the cell's
   // circumscribed footprint) for "may be object", shrunk (its inscribed one) for "is object".
+  // Only cells outside at most one view can be in a view's others' hull (a fraction of the
+  // grid): listed once, in grid order, with their centres and whether they lie on the surface
+  // of a view's others' hull, where a neighbour is not in it: one is carved by two views or off
+  // the grid (a surface cell for every view), or the neighbours not in every view's others' hull
+  // are carved by one view alone (a surface cell but for that view when it is always the same).
+  constexpr std::int16_t kAlwaysSurface = -1;
+  constexpr std::int16_t kNeverSurface = -2;
+  struct Held {
+    Eigen::Vector3d centre;
+    std::uint32_t cell;
+    std::int16_t surface_but_for;  // a view, or kAlwaysSurface, kNeverSurface
+  };
+  std::vector<Held> held;
+  const std::size_t slice = static_cast<std::size_t>(cells_per_axis) * cells_per_axis;
+  for (std::size_t c = 0; c < cells; ++c) {
+    if (outside[c] > 1) continue;
+    const std::size_t i = c % cells_per_axis;
+    const std::size_t j = (c / cells_per_axis) % cells_per_axis;
+    const std::size_t k = c / slice;
+    const auto last = static_cast<std::size_t>(cells_per_axis - 1);
+    std::int16_t surface = kNeverSurface;
+    if (i == 0 || j == 0 || k == 0 || i == last || j == last || k == last) {
+      surface = kAlwaysSurface;
+    } else {
+      for (const std::size_t neighbour :
+           {c - 1, c + 1, c - cells_per_axis, c + cells_per_axis, c - slice, c + slice}) {
+        if (outside[neighbour] == 0) continue;
+        if (outside[neighbour] > 1 ||
+            (surface != kNeverSurface && surface != only_outside[neighbour])) {
+          surface = kAlwaysSurface;
+          break;
+        }
+        surface = only_outside[neighbour];
+      }
+    }
+    held.push_back({cell_centre(c), static_cast<std::uint32_t>(c), surface});
+  }
   std::vector<cv::Mat> priors(n);
   ParallelFor(n, 1, threads, [&](std::size_t begin, std::size_t end) {
     for (std::size_t v = begin; v < end; ++v) {
       const ViewData& d = data[v];
+      const auto view = static_cast<std::int16_t>(v);
       cv::Mat may(cameras[v].height, cameras[v].width, CV_8UC1, cv::Scalar(0));
       cv::Mat is(may.size(), CV_8UC1, cv::Scalar(0));
       double footprint_sum = 0.0;
       int footprints = 0;
       DiscSpans discs;
-      const auto in_may = [&](std::size_t c) {
-        return outside[c] == 0 || (outside[c] == 1 && only_outside[c] == static_cast<int>(v));
-      };
       // The footprints of the region's surface cells cover its projection (a ray through it
       // enters through one of them): the inner cells need not be drawn into `may`.
-      const std::size_t slice = static_cast<std::size_t>(cells_per_axis) * cells_per_axis;
-      const auto on_surface = [&](std::size_t c) {
-        const std::size_t i = c % cells_per_axis;
-        const std::size_t j = (c / cells_per_axis) % cells_per_axis;
-        const std::size_t k = c / slice;
-        const auto last = static_cast<std::size_t>(cells_per_axis - 1);
-        if (i == 0 || j == 0 || k == 0 || i == last || j == last || k == last) return true;
-        return !in_may(c - 1) || !in_may(c + 1) || !in_may(c - cells_per_axis) ||
-               !in_may(c + cells_per_axis) || !in_may(c - slice) || !in_may(c + slice);
-      };
-      for (std::size_t c = 0; c < cells; ++c) {
-        if (!in_may(c)) continue;
-        const Eigen::Vector3d p = d.rotation * cell_centre(c) + d.translation;
+      for (const Held& h : held) {
+        const std::size_t c = h.cell;
+        if (outside[c] == 1 && only_outside[c] != view) continue;  // not in this view's
+        const Eigen::Vector3d p = d.rotation * h.centre + d.translation;
         if (p.z() - rho <= kNearM) continue;
         const double r_out = d.focal_max * rho / (p.z() - rho) + 1.0;
         footprint_sum += r_out;
         ++footprints;
-        const bool in_is =
-            not_inside[c] == 0 || (not_inside[c] == 1 && only_not_inside[c] == static_cast<int>(v));
-        const bool surface = on_surface(c);
+        const bool in_is = not_inside[c] == 0 || (not_inside[c] == 1 && only_not_inside[c] == view);
+        const bool surface = h.surface_but_for == kAlwaysSurface ||
+                             (h.surface_but_for >= 0 && h.surface_but_for != view);
         if (!surface && !in_is) continue;
         const Eigen::Vector2d pixel = d.camera->ProjectFromCam(p);
         const cv::Point centre(cvRound(pixel.x()), cvRound(pixel.y()));

@@ -100,4 +100,20 @@ struct CameraModel {
   void CvPose(cv::Vec3d* rvec, cv::Vec3d* tvec) const;
 };
 
+// Inline: the visual hull and the priors project millions of points.
+inline Eigen::Vector2d Distortion::Apply(const Eigen::Vector2d& xy) const {
+  Eigen::Vector2d distorted;
+  DistortNormalized(k1, k2, p1, p2, k3, xy.x(), xy.y(), &distorted.x(), &distorted.y());
+  return distorted;
+}
+
+inline Eigen::Vector2d CameraModel::PixelFromNormalized(const Eigen::Vector2d& xy) const {
+  const Eigen::Vector2d distorted = distortion.Apply(xy);
+  return {fx * distorted.x() + cx, fy * distorted.y() + cy};
+}
+
+inline Eigen::Vector2d CameraModel::ProjectFromCam(const Eigen::Vector3d& point_cam) const {
+  return PixelFromNormalized(point_cam.head<2>() / point_cam.z());
+}
+
 }  // namespace carousel
