@@ -1695,18 +1695,23 @@ cv::Mat SegmentBacklitAtWorkingSize(const cv::Mat& image, const SilhouetteOption
   return fg;
 }
 
+// Views whose silhouette disagrees with the hull of the other views.
+struct Disagreement {
+  std::vector<std::size_t> holes;  // with holes
+  std::vector<std::size_t> any;    // with holes or spills
+};
+
 // The views whose silhouette disagrees with the hull of the other views (`priors`, from
 // OthersHullPriors; enclosed backdrop left at 255 there, open backdrop lowered to 192): object
 // where no other view allows it (a spill), or backdrop where every other view says object (a
-// hole). With `holes_only`, the views with holes alone. A view that disagrees over more than
-// kMaxRepairFraction of its silhouette is left for the hull to name.
-std::vector<std::size_t> DisagreeingViews(const std::vector<View>& views, SilhouettesResult* result,
-                                          int threads, bool holes_only,
-                                          std::vector<cv::Mat>* priors) {
+// hole). A view that disagrees over more than kMaxRepairFraction of its silhouette is left for
+// the hull to name.
+Disagreement DisagreeingViews(const std::vector<View>& views, SilhouettesResult* result,
+                              int threads, std::vector<cv::Mat>* priors) {
   // The views that disagree with the others' hull: object where no other view allows it, or
   // backdrop where every other view says object. Decided at the priors' size (the grid is
   // coarse), in parallel.
-  std::vector<std::uint8_t> disagrees(views.size(), 0);
+  std::vector<std::uint8_t> holes(views.size(), 0), disagrees(views.size(), 0);
   ParallelFor(views.size(), 1, threads, [&](std::size_t begin, std::size_t end) {
     for (std::size_t v = begin; v < end; ++v) {
       // Sampled at the pixel centres, as OthersHullPriors does.
@@ -1753,9 +1758,9 @@ std::vector<std::size_t> DisagreeingViews(const std::vector<View>& views, Silhou
       // A hole carves a tunnel through the hull whatever its size; a spill is only carved. A
       // view that disagrees about much of its object is not a segmentation slip but a wrong
       // pose or photo: made to agree, it would hide that; the hull names it instead.
+      const bool hole_slip = hole > kMinDisagreementPx;
       const bool slip =
-          hole > kMinDisagreementPx ||
-          (!holes_only && spill > std::max(kMinDisagreementPx, kMinDisagreementFraction * area));
+          hole_slip || spill > std::max(kMinDisagreementPx, kMinDisagreementFraction * area);
       if (slip && hole + spill > kMaxRepairFraction * area) {
         CAROUSEL_LOG_WARN(views[v].name()
                           << ": the silhouette disagrees with the other views' hull over "
@@ -1763,13 +1768,16 @@ std::vector<std::size_t> DisagreeingViews(const std::vector<View>& views, Silhou
                           << "% of its area: not repaired (a wrong camera pose or photo?)");
         continue;
       }
+      holes[v] = hole_slip;
       disagrees[v] = slip;
     }
   });
-  std::vector<std::size_t> disagreeing;
-  for (std::size_t v = 0; v < views.size(); ++v)
-    if (disagrees[v]) disagreeing.push_back(v);
-  return disagreeing;
+  Disagreement found;
+  for (std::size_t v = 0; v < views.size(); ++v) {
+    if (holes[v]) found.holes.push_back(v);
+    if (disagrees[v]) found.any.push_back(v);
+  }
+  return found;
 }
 
 // Keyed silhouettes that stop at the plate's rim in most views: the product above the plate
@@ -1945,16 +1953,16 @@ void MakeConsistent(const std::vector<View>& views, const std::vector<cv::Mat>& 
   // view's prior, which would then "repair" their silhouettes to agree with it), then, against
   // priors made from the repaired masks, every view that still disagrees.
   std::vector<cv::Mat> priors;
+  Disagreement found;
   bool stale = true;
   for (int pass = 0; pass < 2; ++pass) {
-    const bool holes_only = pass == 0;
     if (stale) {
       priors = OthersHullPriors(views, result->masks, hull_options);
       if (priors.empty()) return;  // an empty silhouette: the hull names it
+      found = DisagreeingViews(views, result, options.threads, &priors);
       stale = false;
     }
-    const std::vector<std::size_t> disagreeing =
-        DisagreeingViews(views, result, options.threads, holes_only, &priors);
+    const std::vector<std::size_t> disagreeing = pass == 0 ? found.holes : found.any;
     if (disagreeing.empty()) continue;
     stale = true;
     progress.BeginStage("silhouettes: multi-view consistency");
