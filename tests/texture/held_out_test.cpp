@@ -10,6 +10,8 @@
 
 #include <gtest/gtest.h>
 
+#include <opencv2/imgcodecs.hpp>
+
 #include "carousel/core/error.h"
 #include "carousel/core/mesh_io.h"
 #include "carousel/testing/testing.h"
@@ -188,6 +190,9 @@ TEST(HeldOutTest, TheGlbReadBackRendersLikeTheMeshItCameFrom) {
   EXPECT_EQ(glb.triangles.size(), 2u);
   EXPECT_EQ(glb.wrap, TexturedModel::Wrap::kClampToEdge);
   EXPECT_EQ(cv::norm(glb.texture, texture, cv::NORM_INF), 0.0);  // PNG: lossless
+  const cv::Mat png = cv::imread(files.texture.string(), cv::IMREAD_COLOR);
+  ASSERT_EQ(png.size(), texture.size());
+  EXPECT_EQ(cv::norm(png, texture, cv::NORM_INF), 0.0);
   // Z up again: the quad stands in the plane y = 0, from z = 0 to 0.15.
   for (const Eigen::Vector3d& p : glb.positions) {
     EXPECT_NEAR(p.y(), 0.0, 1e-6);

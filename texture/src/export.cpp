@@ -130,8 +130,13 @@ ExportResult ExportTexturedModel(const Mesh& mesh, const cv::Mat& texture,
   result.texture = folder / (options.name + ".png");
   // Texture.
   Stopwatch stopwatch;
+  // Deflate's run-length strategy: on the filtered rows of a texture atlas (smooth charts, flat
+  // filled space) both faster and smaller than the default one, measured on 3 atlases at level
+  // 3: 8192^2 3.7-4.3 -> 2.4 s, 32.1 -> 26.9 MB; 3072^2 0.59-0.80 -> 0.39-0.52 s, 10-16 % smaller.
   std::vector<std::uint8_t> png;
-  if (!cv::imencode(".png", texture, png, {cv::IMWRITE_PNG_COMPRESSION, options.png_compression}))
+  if (!cv::imencode(".png", texture, png,
+                    {cv::IMWRITE_PNG_COMPRESSION, options.png_compression, cv::IMWRITE_PNG_STRATEGY,
+                     cv::IMWRITE_PNG_STRATEGY_RLE}))
     throw IoError(result.texture, "PNG encoding failed");
   WriteFileAtomic(result.texture, png);
   result.seconds_png = stopwatch.ElapsedSeconds();
