@@ -259,6 +259,13 @@ class Classifier {
   const SilhouetteOptions& options_;
 };
 
+// `rect` grown by `margin` on every side, within `frame`.
+cv::Rect Grown(const cv::Rect& rect, int margin, const cv::Rect& frame) {
+  return cv::Rect(rect.x - margin, rect.y - margin, rect.width + 2 * margin,
+                  rect.height + 2 * margin) &
+         frame;
+}
+
 // The fraction of the plate's inner edge (just inside the rim band) that shows the plate's
 // model with the backdrop's model just outside it: the plate seen against the backdrop.
 double VisiblePlateEdge(const cv::Mat& image, const cv::Mat& plate, const cv::Mat& rim,
@@ -268,8 +275,7 @@ double VisiblePlateEdge(const cv::Mat& image, const cv::Mat& plate, const cv::Ma
   constexpr int kRing = 3;
   cv::Rect box = cv::boundingRect(rim);
   if (box.area() == 0) return 0.0;
-  box = cv::Rect(box.x - kRing, box.y - kRing, box.width + 2 * kRing, box.height + 2 * kRing) &
-        cv::Rect(0, 0, image.cols, image.rows);
+  box = Grown(box, kRing, cv::Rect(0, 0, image.cols, image.rows));
   const cv::Mat rim_box = rim(box);
   const cv::Mat plate_box = plate(box);
   cv::Mat near_rim;
@@ -680,9 +686,8 @@ void IteratedGraphCut(const cv::Mat& image, int iterations, cv::Mat* labels) {
 // border's colours are not sampled where the expected colour is `unsure` (CV_8UC1, 255; may be
 // empty): in the plate's rim band, where the backdrop shows beside a plate that reaches the
 // frame's edge, the plate's expected colour would make the backdrop's white a border colour,
-// and a white sole on the plate backdrop. Returns
-// the full-size binary mask (255 = object), and in *grid_step the graph cut's pixel in the
-// image's.
+// and a white sole on the plate backdrop. Returns the full-size binary mask (255 = object), and
+// in *grid_step the graph cut's pixel in the image's.
 cv::Mat SegmentByGraphCut(const cv::Mat& image, const cv::Mat& candidates, const cv::Mat& unsure,
                           const ExpectedBackground& expected, const SilhouetteOptions& options,
                           const cv::Mat& prior, const std::string& name, double* largest_piece,
@@ -709,8 +714,7 @@ cv::Mat SegmentByGraphCut(const cv::Mat& image, const cv::Mat& candidates, const
                static_cast<int>(std::ceil(coarse_roi.width / coarse)) + 1,
                static_cast<int>(std::ceil(coarse_roi.height / coarse)) + 1);
   const int margin = std::max(8, std::max(roi.width, roi.height) / 10);
-  roi = cv::Rect(roi.x - margin, roi.y - margin, roi.width + 2 * margin, roi.height + 2 * margin) &
-        cv::Rect(cv::Point(0, 0), full);
+  roi = Grown(roi, margin, cv::Rect(cv::Point(0, 0), full));
   const double scale =
       std::min(1.0, static_cast<double>(kGraphCutSize) / std::max(roi.width, roi.height));
   *grid_step = 1.0 / scale;
@@ -1062,8 +1066,7 @@ cv::Rect RefineToAlpha(const std::vector<MatteShot>& shots, const SilhouetteOpti
   const int pad = 2 * band + 2;
   const cv::Rect frame(0, 0, size.width, size.height);
   if (box.area() == 0) return {};
-  const cv::Rect roi =
-      cv::Rect(box.x - pad, box.y - pad, box.width + 2 * pad, box.height + 2 * pad) & frame;
+  const cv::Rect roi = Grown(box, pad, frame);
   const double min_contrast = 2.0 * std::max(options.noise_threshold, 4.0);
   constexpr int kTile = 64;
   struct Tile {
@@ -1075,15 +1078,11 @@ cv::Rect RefineToAlpha(const std::vector<MatteShot>& shots, const SilhouetteOpti
     for (int tx = roi.x; tx < roi.br().x; tx += kTile) {
       const cv::Rect core = cv::Rect(tx, ty, kTile, kTile) & roi;
       // The outline passes when the core, grown by the band, holds both sides.
-      const cv::Rect reach =
-          cv::Rect(core.x - band, core.y - band, core.width + 2 * band, core.height + 2 * band) &
-          frame;
+      const cv::Rect reach = Grown(core, band, frame);
       const int object_px = cv::countNonZero(binary(reach));
       if (object_px == 0 || object_px == reach.area()) continue;
       const int margin = pad + band;
-      const cv::Rect region = cv::Rect(core.x - margin, core.y - margin, core.width + 2 * margin,
-                                       core.height + 2 * margin) &
-                              frame;
+      const cv::Rect region = Grown(core, margin, frame);
       const cv::Mat fg_region = binary(region);
       // The band's two edges: the object shrunk and grown by a disc of the band's radius (by
       // distance: a morphology with a disc is many times slower on 18-Mpx photos' outlines).
@@ -1104,16 +1103,14 @@ cv::Rect RefineToAlpha(const std::vector<MatteShot>& shots, const SilhouetteOpti
       if (cv::countNonZero(shrunk) == 0 || cv::countNonZero(grown) == region.area()) continue;
       // The sure pixels nearest each pixel, within their reach of the core (a band pixel's
       // nearest sure pixel lies within twice the band).
-      const cv::Rect inner =
-          cv::Rect(core.x - pad, core.y - pad, core.width + 2 * pad, core.height + 2 * pad) & frame;
+      const cv::Rect inner = Grown(core, pad, frame);
       const cv::Rect in_region(inner.tl() - region.tl(), inner.size());
       const cv::Mat nearest_object = NearestSure(shrunk(in_region));
       const cv::Mat nearest_background = NearestSure(~grown(in_region));
       const cv::Point offset = core.tl() - region.tl();
       const cv::Point inner_offset = core.tl() - inner.tl();
       // Their colours smoothed over 3x3 (read one pixel further), per shot.
-      const cv::Rect read =
-          cv::Rect(inner.x - 1, inner.y - 1, inner.width + 2, inner.height + 2) & frame;
+      const cv::Rect read = Grown(inner, 1, frame);
       Tile tile{core, {}};
       for (const MatteShot& shot : shots) {
         cv::Mat smooth;
@@ -1340,9 +1337,7 @@ cv::Mat Upsampled(const cv::Mat& small, cv::Size size, cv::Rect* box) {
     *box = cv::boundingRect(out);
     return out;
   }
-  const cv::Rect read =
-      cv::Rect(small_box.x - 1, small_box.y - 1, small_box.width + 2, small_box.height + 2) &
-      cv::Rect(0, 0, small.cols, small.rows);
+  const cv::Rect read = Grown(small_box, 1, cv::Rect(0, 0, small.cols, small.rows));
   const cv::Rect written(read.x * factor, read.y * factor, read.width * factor,
                          read.height * factor);
   out = cv::Mat::zeros(size, CV_8UC1);
@@ -1507,8 +1502,7 @@ cv::Mat SegmentAtWorkingSize(const cv::Mat& image, const CameraModel& camera,
   // Pieces and holes are looked for within the object's box and a pixel of background around
   // it (a hole that reaches the box's edge is open to the backdrop beyond).
   const cv::Rect found = cv::boundingRect(fg);
-  const cv::Rect box = cv::Rect(found.x - 1, found.y - 1, found.width + 2, found.height + 2) &
-                       cv::Rect(0, 0, width, height);
+  const cv::Rect box = Grown(found, 1, cv::Rect(0, 0, width, height));
   cv::Mat fg_box = fg(box);
   RemoveSmallComponents(&fg_box, options.min_component_fraction, &components);
   const double object_area = cv::countNonZero(fg_box);
@@ -1645,8 +1639,7 @@ cv::Mat SegmentBacklitAtWorkingSize(const cv::Mat& image, const SilhouetteOption
   // open to the panel beyond).
   {
     const cv::Rect found = cv::boundingRect(fg);
-    const cv::Rect box = cv::Rect(found.x - 1, found.y - 1, found.width + 2, found.height + 2) &
-                         cv::Rect(0, 0, width, height);
+    const cv::Rect box = Grown(found, 1, cv::Rect(0, 0, width, height));
     cv::Mat background = ~fg(box);
     cv::Mat labels, stats_mat, centroids;
     const int n =
