@@ -96,7 +96,7 @@ TextureMap TransferTexture(const Mesh& mesh, const std::vector<View>& views,
   Stopwatch stopwatch;
   progress.BeginStage("texture: transfer");
   const std::vector<internal::FaceData> faces = internal::ReadFaces(mesh);
-  internal::ViewSampler sampler(views, grouping, options);
+  internal::ViewSampler sampler(faces, views, grouping, options);
   if (options.gain) sampler.SetGains(internal::EstimateGains(faces, grouping, sampler));
   TextureMap result;
   result.gains = sampler.gains();

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <utility>
 
+#include <Eigen/Geometry>
+
 #include <opencv2/imgproc.hpp>
 
 #include "carousel/core/parallel.h"
@@ -115,57 +117,67 @@ FaceCounts TransferFace(const TransferInputs& in, int f, std::vector<cv::Point>*
   return counts;
 }
 
+// The part of the photo the mesh projects into, with a margin for bilinear sampling and the
+// masks' erosion; the whole photo when a corner is behind the camera.
+cv::Rect ProjectedBox(const std::vector<FaceData>& faces, const CameraModel& camera) {
+  constexpr int kMargin = 8;  // pixels
+  const cv::Rect photo(0, 0, camera.width, camera.height);
+  Eigen::AlignedBox2d box;
+  for (const FaceData& face : faces)
+    for (const Eigen::Vector3d& p : face.p) {
+      const auto px = camera.Project(p);
+      if (!px) return photo;
+      box.extend(*px);
+    }
+  if (box.isEmpty()) return photo;
+  const cv::Point lower(static_cast<int>(std::floor(box.min().x())) - kMargin,
+                        static_cast<int>(std::floor(box.min().y())) - kMargin);
+  const cv::Point upper(static_cast<int>(std::ceil(box.max().x())) + kMargin + 1,
+                        static_cast<int>(std::ceil(box.max().y())) + kMargin + 1);
+  const cv::Rect inside = cv::Rect(lower, upper) & photo;
+  return inside.area() > 0 ? inside : photo;
+}
+
 }  // namespace
 
-ViewSampler::ViewSampler(const std::vector<View>& views, const GroupingResult& grouping,
-                         const TransferOptions& options)
+ViewSampler::ViewSampler(const std::vector<FaceData>& faces, const std::vector<View>& views,
+                         const GroupingResult& grouping, const TransferOptions& options)
     : views_(views),
       photos_(views.size()),
       masks_(views.size()),
+      origins_(views.size(), Eigen::Vector2d::Zero()),
       gains_(views.size(), cv::Vec3d(1, 1, 1)) {
   const int nv = static_cast<int>(views.size());
-  // Photos of the views in use.
-  {
-    std::vector<unsigned char> used(nv, 0);
-    for (const int v : grouping.front_view)
-      if (v >= 0) used[v] = 1;
-    ParallelFor(views.size(), 1, 0, [&](std::size_t begin, std::size_t end) {
-      for (std::size_t v = begin; v < end; ++v)
-        if (used[v]) photos_[v] = views[v].Image();
-    });
-  }
-  // Masks of the views that may serve a texel.
-  if (options.correction) {
-    std::vector<unsigned char> needed(nv, 0);
-    for (std::size_t i = 0; i < grouping.seen.size(); ++i)
-      if (grouping.seen[i]) needed[i % nv] = 1;
-    ParallelFor(views.size(), 1, 0, [&](std::size_t begin, std::size_t end) {
-      for (std::size_t v = begin; v < end; ++v)
-        if (needed[v]) {
-          // Shrunk by 2 pixels: the silhouette's edge pixels mix object and background.
-          cv::erode(views[v].Mask() >= 128, masks_[v],
-                    cv::getStructuringElement(cv::MORPH_ELLIPSE, {5, 5}));
-          if (photos_[v].empty()) photos_[v] = views[v].Image();
-        }
-    });
-  }
-  // Photos the gains are measured in.
-  if (options.gain) {
-    const std::size_t nf = grouping.front_view.size();
-    for (int v = 0; v < nv; ++v)
-      if (photos_[v].empty()) {
-        bool any = false;
-        for (std::size_t f = 0; f < nf && !any; ++f) any = grouping.usable[f * nv + v] != 0;
-        if (any) photos_[v] = views[v].Image();
-      }
-  }
+  // The photos of the views in use: front views; with correction, the views that see some
+  // face; with gains, the views usable for some face. The masks of the views that may serve a
+  // texel (with correction).
+  std::vector<unsigned char> photo(nv, 0), mask(nv, 0);
+  for (const int v : grouping.front_view)
+    if (v >= 0) photo[v] = 1;
+  for (std::size_t i = 0; i < grouping.seen.size(); ++i)
+    if (options.correction && grouping.seen[i]) photo[i % nv] = mask[i % nv] = 1;
+  for (std::size_t i = 0; i < grouping.usable.size() && options.gain; ++i)
+    if (grouping.usable[i]) photo[i % nv] = 1;
+  ParallelFor(views.size(), 1, 0, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t v = begin; v < end; ++v) {
+      if (!photo[v] && !mask[v]) continue;
+      const cv::Rect box = ProjectedBox(faces, views[v].camera());
+      origins_[v] = Eigen::Vector2d(box.x, box.y);
+      if (photo[v]) photos_[v] = views[v].Image()(box).clone();
+      // Shrunk by 2 pixels: the silhouette's edge pixels mix object and background.
+      if (mask[v])
+        cv::erode(views[v].Mask()(box) >= 128, masks_[v],
+                  cv::getStructuringElement(cv::MORPH_ELLIPSE, {5, 5}));
+      views[v].ReleasePixels();
+    }
+  });
 }
 
 bool ViewSampler::OnObject(int v, const Eigen::Vector3d& p) const {
   if (masks_[v].empty()) return true;
   const Eigen::Vector3d c = views_[v].camera().cam_from_world * p;
   if (c.z() <= 1e-6) return false;
-  const Eigen::Vector2d px = views_[v].camera().ProjectFromCam(c);
+  const Eigen::Vector2d px = views_[v].camera().ProjectFromCam(c) - origins_[v];
   const int x = static_cast<int>(std::lround(px.x())), y = static_cast<int>(std::lround(px.y()));
   return x >= 0 && y >= 0 && x < masks_[v].cols && y < masks_[v].rows &&
          masks_[v].at<std::uint8_t>(y, x) >= 128;
@@ -175,7 +187,8 @@ bool ViewSampler::Sample(int v, const Eigen::Vector3d& p, cv::Vec3d* colour) con
   if (photos_[v].empty()) return false;
   const Eigen::Vector3d c = views_[v].camera().cam_from_world * p;
   if (c.z() <= 1e-6) return false;
-  if (!SampleBilinear(photos_[v], views_[v].camera().ProjectFromCam(c), colour)) return false;
+  if (!SampleBilinear(photos_[v], views_[v].camera().ProjectFromCam(c) - origins_[v], colour))
+    return false;
   for (int k = 0; k < 3; ++k) (*colour)[k] *= gains_[v][k];
   return true;
 }
