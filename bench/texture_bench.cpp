@@ -13,6 +13,7 @@
 //   texture_bench [--scene shoe|bottle|...] [--width W] [--height H] [--stops N]
 //                 [--sizes 8192,0] [--exclude 3,11] [--work DIR] [--faces N] [--no-blend]
 //                 [--no-correction] [--no-gain] [--unlit]
+//   texture_bench --blob [--blob-faces 50000] [--blob-seeds N]   (blob_scene.h)
 //
 // --unlit: photos of the albedo alone (the lights fixed in the studio shade every photo
 // differently as the table turns; no texture can agree with all of them): what is left of
@@ -28,6 +29,7 @@
 #include <vector>
 
 #include "bench_flags.h"
+#include "blob_scene.h"
 #include "carousel/core/mesh_io.h"
 #include "carousel/core/progress.h"
 #include "carousel/core/timer.h"
@@ -67,7 +69,8 @@ int Run(int argc, char** argv) {
   std::filesystem::path work = std::filesystem::temp_directory_path() / "carousel_texture_bench";
   bool no_blend = false, no_correction = false, no_gain = false;
   int given_faces = 0;
-  bool unlit = false;
+  bool unlit = false, blob = false;
+  bench::BlobSceneOptions blob_options;
   BenchFlags flags(argc, argv, "texture_bench: the texture stage of a simulated session, timed");
   flags.Option("--scene", &scene, "shoe, bottle, avocado, duck")
       .Option("--width", &width)
@@ -80,10 +83,14 @@ int Run(int argc, char** argv) {
               "texture the true surface decimated to N faces, 0 = the reconstruction's")
       .Flag("--unlit", &unlit,
             "photos of the albedo alone (no studio lights): texturing error only")
+      .Flag("--blob", &blob, "the noisy-blob scene instead (procedural albedo, per-view gains)")
+      .Option("--blob-faces", &blob_options.faces, "faces of the blob, about")
+      .Option("--blob-seeds", &blob_options.seeds, "blobs 1..N")
       .Flag("--no-blend", &no_blend)
       .Flag("--no-correction", &no_correction)
       .Flag("--no-gain", &no_gain);
   if (const std::optional<int> exit_code = flags.Parse(std::cout, std::cerr)) return *exit_code;
+  if (blob) return bench::RunBlobScene(blob_options);
   const bool blend = !no_blend, correction = !no_correction, gain = !no_gain;
   try {
     Progress progress;

@@ -72,8 +72,8 @@ class ViewSampler {
               const GroupingResult& grouping, const TransferOptions& options);
   // Whether `p` (world) falls on view v's object (its eroded mask; true without a mask).
   bool OnObject(int v, const Eigen::Vector3d& p) const;
-  // View v's photo at `p`, bilinear, times the view's gain; false when v has no photo loaded,
-  // `p` is behind the camera or outside the photo.
+  // View v's photo at `p` (Lanczos-3; bilinear at the border), times the view's gain; false when v
+  // has no photo loaded, `p` is behind the camera or outside the photo.
   bool Sample(int v, const Eigen::Vector3d& p, cv::Vec3d* colour) const;
   void SetGains(std::vector<cv::Vec3d> gains) { gains_ = std::move(gains); }
   const std::vector<cv::Vec3d>& gains() const { return gains_; }

@@ -11,8 +11,9 @@
 //
 // Transfer works per texel: the texel's centre is mapped through its face's UV triangle to a
 // surface point, projected into the front photo with the full camera model (lens distortion
-// included) and sampled bilinearly, so the texture is as sharp as the photo. Seam blending
-// follows the paper's Eq. 8 near edges between faces of different front images; per-view
+// included) and sampled with a Lanczos-3 kernel (sharper than bilinear interpolation, whose
+// blur a viewer's own texture filtering adds to), so the texture is as sharp as the photo. Seam
+// blending follows the paper's Eq. 8 near edges between faces of different front images; per-view
 // colour gains (least squares over faces seen by several views) even out exposure
 // differences; the gutter is dilated so that mip-mapping does not pull in black. Faces no
 // view sees get the colour of their neighbours and are counted.
