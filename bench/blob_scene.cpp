@@ -31,11 +31,11 @@
 namespace carousel::bench {
 namespace {
 
-constexpr double kBlobSize = 0.25;         // metres across
-constexpr double kCameraDistance = 0.55;   // metres from the blob's centre
-constexpr double kFocalPerWidth = 1.1;     // focal length / image width
-constexpr int kBakeSize = 4096;            // the true albedo's texture for the renderer
-constexpr double kContrast = 2.0;          // of the albedo's fractal detail
+constexpr double kBlobSize = 0.25;        // metres across
+constexpr double kCameraDistance = 0.55;  // metres from the blob's centre
+constexpr double kFocalPerWidth = 1.1;    // focal length / image width
+constexpr int kBakeSize = 4096;           // the true albedo's texture for the renderer
+constexpr double kContrast = 2.0;         // of the albedo's fractal detail
 
 // A hash of a lattice point to [0, 1).
 double Hash01(std::int64_t x, std::int64_t y, std::int64_t z, std::uint64_t seed) {
@@ -61,8 +61,7 @@ double ValueNoise(const Eigen::Vector3d& q, std::uint64_t seed) {
   double value = 0.0;
   for (int corner = 0; corner < 8; ++corner) {
     const int dx = corner & 1, dy = (corner >> 1) & 1, dz = (corner >> 2) & 1;
-    const double w =
-        (dx ? s[0] : 1.0 - s[0]) * (dy ? s[1] : 1.0 - s[1]) * (dz ? s[2] : 1.0 - s[2]);
+    const double w = (dx ? s[0] : 1.0 - s[0]) * (dy ? s[1] : 1.0 - s[1]) * (dz ? s[2] : 1.0 - s[2]);
     value += w * Hash01(x0 + dx, y0 + dy, z0 + dz, seed);
   }
   return value;
@@ -138,7 +137,8 @@ void PushPull(cv::Mat* colour, cv::Mat* weight) {
     return;
   }
   const float w = weight->at<float>(0, 0);
-  colour->at<cv::Vec3f>(0, 0) = w > 0.0f ? colour->at<cv::Vec3f>(0, 0) / w : cv::Vec3f(128, 128, 128);
+  colour->at<cv::Vec3f>(0, 0) =
+      w > 0.0f ? colour->at<cv::Vec3f>(0, 0) / w : cv::Vec3f(128, 128, 128);
   weight->at<float>(0, 0) = 1.0f;
 }
 
@@ -242,8 +242,8 @@ std::vector<View> Photograph(const sim::Scene& scene, const std::vector<CameraMo
                              double noise_sigma, double gain_spread, std::uint64_t seed) {
   std::vector<View> views;
   for (std::size_t v = 0; v < cameras.size(); ++v) {
-    const double gain = 1.0 + gain_spread * (2.0 * Hash01(static_cast<std::int64_t>(v), 0, 7,
-                                                          seed) - 1.0);
+    const double gain =
+        1.0 + gain_spread * (2.0 * Hash01(static_cast<std::int64_t>(v), 0, 7, seed) - 1.0);
     const sim::RenderResult r =
         sim::Render(scene, cameras[v], 0.0, Unlit(noise_sigma, gain, seed * 100 + v));
     View view(cameras[v], {});
@@ -273,10 +273,9 @@ double ScorePsnr(const Mesh& mesh, const cv::Mat& texture, std::uint64_t seed) {
   const int size = texture.cols;
   for (int i = 0; i < kPoints; ++i) {
     const double pick = Hash01(i, 1, 0, seed) * total;
-    const auto f = static_cast<std::size_t>(
-        std::min<std::ptrdiff_t>(std::lower_bound(cumulative.begin(), cumulative.end(), pick) -
-                                     cumulative.begin(),
-                                 static_cast<std::ptrdiff_t>(cumulative.size()) - 1));
+    const auto f = static_cast<std::size_t>(std::min<std::ptrdiff_t>(
+        std::lower_bound(cumulative.begin(), cumulative.end(), pick) - cumulative.begin(),
+        static_cast<std::ptrdiff_t>(cumulative.size()) - 1));
     // Uniform in the triangle.
     const double r1 = std::sqrt(Hash01(i, 2, 0, seed));
     const double r2 = Hash01(i, 3, 0, seed);
@@ -336,10 +335,9 @@ Run TextureBlob(const Mesh& blob, const std::vector<View>& views, const Variant&
   builder.Parameterize(atlas.parameterization, progress);
   texture::AtlasSizeOptions size = atlas.size;
   size.size = variant.size;
-  run.size = builder
-                 .DecideSizeAndPack(atlas.packing, size, views, groups.front_view, &run.mesh,
-                                    progress)
-                 .size;
+  run.size =
+      builder.DecideSizeAndPack(atlas.packing, size, views, groups.front_view, &run.mesh, progress)
+          .size;
   texture::TransferOptions transfer;
   transfer.correction = false;
   transfer.gain = variant.gain;
@@ -389,8 +387,7 @@ int RunBlobScene(const BlobSceneOptions& options) {
       const double scale = kBlobSize / bounds.sizes().maxCoeff();
       for (const auto v : blob.vertices()) {
         auto& q = blob.point(v);
-        const Eigen::Vector3d p =
-            (Eigen::Vector3d(q[0], q[1], q[2]) - bounds.center()) * scale;
+        const Eigen::Vector3d p = (Eigen::Vector3d(q[0], q[1], q[2]) - bounds.center()) * scale;
         q = Mesh::Point(p.x(), p.y(), p.z());
       }
       // The scene's UVs: our own atlas of the blob (any parameterization would do).
