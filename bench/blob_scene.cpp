@@ -153,19 +153,12 @@ cv::Mat BakeAlbedo(const Mesh& mesh, int size, std::uint64_t seed) {
     std::array<Eigen::Vector2d, 3> t;
     for (int k = 0; k < 3; ++k)
       t[k] = Eigen::Vector2d(uv[k].x() * size - 0.5, (1.0 - uv[k].y()) * size - 0.5);
-    const double area =
-        (t[1] - t[0]).x() * (t[2] - t[0]).y() - (t[1] - t[0]).y() * (t[2] - t[0]).x();
-    if (std::abs(area) < 1e-12) continue;
-    ForEachPixelCentreIn(t, size, size, [&](int x, int y) {
-      const Eigen::Vector2d q(x, y);
-      const double b1 =
-          ((q - t[0]).x() * (t[2] - t[0]).y() - (q - t[0]).y() * (t[2] - t[0]).x()) / area;
-      const double b2 =
-          ((t[1] - t[0]).x() * (q - t[0]).y() - (t[1] - t[0]).y() * (q - t[0]).x()) / area;
-      const cv::Vec3d a = Albedo((1.0 - b1 - b2) * p[0] + b1 * p[1] + b2 * p[2], seed);
-      colour.at<cv::Vec3f>(y, x) = cv::Vec3f(a);
-      weight.at<float>(y, x) = 1.0f;
-    });
+    ForEachPixelCentreWithBarycentrics(
+        t, size, size, [&](int x, int y, const std::array<double, 3>& b) {
+          const cv::Vec3d a = Albedo(b[0] * p[0] + b[1] * p[1] + b[2] * p[2], seed);
+          colour.at<cv::Vec3f>(y, x) = cv::Vec3f(a);
+          weight.at<float>(y, x) = 1.0f;
+        });
   }
   PushPull(&colour, &weight);
   cv::Mat out;

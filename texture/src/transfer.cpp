@@ -113,8 +113,6 @@ FaceCounts TransferFace(const TransferInputs& in, int f, std::vector<cv::Point>*
   std::array<Eigen::Vector2d, 3> t;
   for (int i = 0; i < 3; ++i)
     t[i] = Eigen::Vector2d(face.uv[i].x() * size - 0.5, (1.0 - face.uv[i].y()) * size - 0.5);
-  const double area = (t[1] - t[0]).x() * (t[2] - t[0]).y() - (t[1] - t[0]).y() * (t[2] - t[0]).x();
-  if (std::abs(area) < 1e-12) return counts;
   std::array<int, 3> seam{-1, -1, -1};
   if (in.options.blend) seam = SeamViews(in.faces, f, v, in.grouping);
   // Other views for texels the front photo shows on the background, best angle first.
@@ -127,42 +125,37 @@ FaceCounts TransferFace(const TransferInputs& in, int f, std::vector<cv::Point>*
             w);
   std::sort(others.begin(), others.end());
   int covered = 0;
-  ForEachPixelCentreIn(t, size, size, [&](int x, int y) {
-    const Eigen::Vector2d q(x, y);
-    const double b1 =
-        ((q - t[0]).x() * (t[2] - t[0]).y() - (q - t[0]).y() * (t[2] - t[0]).x()) / area;
-    const double b2 =
-        ((t[1] - t[0]).x() * (q - t[0]).y() - (t[1] - t[0]).y() * (q - t[0]).x()) / area;
-    const std::array<double, 3> b{1.0 - b1 - b2, b1, b2};
-    const Eigen::Vector3d p = At(face, b);
-    cv::Vec3d colour;
-    int source = v;
-    if (in.options.correction && !in.sampler.OnObject(v, p)) {
-      source = -1;
-      for (const auto& [score, w] : others)
-        if (in.sampler.OnObject(w, p)) {
-          source = w;
-          break;
+  ForEachPixelCentreWithBarycentrics(
+      t, size, size, [&](int x, int y, const std::array<double, 3>& b) {
+        const Eigen::Vector3d p = At(face, b);
+        cv::Vec3d colour;
+        int source = v;
+        if (in.options.correction && !in.sampler.OnObject(v, p)) {
+          source = -1;
+          for (const auto& [score, w] : others)
+            if (in.sampler.OnObject(w, p)) {
+              source = w;
+              break;
+            }
+          if (source < 0) {
+            holes->emplace_back(x, y);
+            map->coverage.at<std::uint8_t>(y, x) = 255;
+            ++covered;
+            return;
+          }
+          ++counts.corrected;
         }
-      if (source < 0) {
-        holes->emplace_back(x, y);
+        if (!in.sampler.Sample(source, p, &colour)) return;
+        if (source == v && BlendAcrossSeam(in.sampler, seam, b, p, in.options.correction, &colour))
+          ++counts.blended;
+        map->texture.at<cv::Vec3b>(y, x) = cv::Vec3b(cv::saturate_cast<std::uint8_t>(colour[0]),
+                                                     cv::saturate_cast<std::uint8_t>(colour[1]),
+                                                     cv::saturate_cast<std::uint8_t>(colour[2]));
         map->coverage.at<std::uint8_t>(y, x) = 255;
+        texels->face_sum[f] += colour;
+        ++texels->face_count[f];
         ++covered;
-        return;
-      }
-      ++counts.corrected;
-    }
-    if (!in.sampler.Sample(source, p, &colour)) return;
-    if (source == v && BlendAcrossSeam(in.sampler, seam, b, p, in.options.correction, &colour))
-      ++counts.blended;
-    map->texture.at<cv::Vec3b>(y, x) = cv::Vec3b(cv::saturate_cast<std::uint8_t>(colour[0]),
-                                                 cv::saturate_cast<std::uint8_t>(colour[1]),
-                                                 cv::saturate_cast<std::uint8_t>(colour[2]));
-    map->coverage.at<std::uint8_t>(y, x) = 255;
-    texels->face_sum[f] += colour;
-    ++texels->face_count[f];
-    ++covered;
-  });
+      });
   map->texels_per_face[f] = covered;
   const double pixels = ProjectedArea(face, in.views[v].camera());
   map->density_ratio[f] = pixels > 0.0 ? covered / pixels : 0.0;

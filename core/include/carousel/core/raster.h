@@ -46,6 +46,24 @@ void ForEachPixelCentreIn(std::array<Eigen::Vector2d, 3> t, int width, int heigh
         visit(x, y);
 }
 
+// As ForEachPixelCentreIn, with the pixel centre's barycentric coordinates in the triangle
+// (corners in the order given): visit(x, y, b), b[0] + b[1] + b[2] = 1; the surface point of
+// a texel is then b[0] p0 + b[1] p1 + b[2] p2. Nothing for a degenerate triangle.
+template <typename Visit>
+void ForEachPixelCentreWithBarycentrics(const std::array<Eigen::Vector2d, 3>& t, int width,
+                                        int height, Visit&& visit) {
+  const Eigen::Vector2d e1 = t[1] - t[0];
+  const Eigen::Vector2d e2 = t[2] - t[0];
+  const double area = e1.x() * e2.y() - e1.y() * e2.x();
+  if (std::abs(area) < 1e-12) return;
+  ForEachPixelCentreIn(t, width, height, [&](int x, int y) {
+    const Eigen::Vector2d q = Eigen::Vector2d(x, y) - t[0];
+    const double b1 = (q.x() * e2.y() - q.y() * e2.x()) / area;
+    const double b2 = (e1.x() * q.y() - e1.y() * q.x()) / area;
+    visit(x, y, std::array<double, 3>{1.0 - b1 - b2, b1, b2});
+  });
+}
+
 // ---- z-buffered mesh rasterisation ------------------------------------------------------
 //
 // Every pixel holds samples_per_axis^2 samples at offsets ((i + 0.5) / n - 0.5,
