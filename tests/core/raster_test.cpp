@@ -73,6 +73,35 @@ TEST(RasterTest, CoverageFollowsThePixelCentreRuleAndBarycentricsAreExact) {
   EXPECT_GT(covered, 10000);
 }
 
+// The barycentric walk visits the same pixels as the plain one, in either orientation, and
+// its barycentrics (in the corners' given order) sum to 1 and give back the pixel centre; a
+// degenerate triangle visits nothing.
+TEST(RasterTest, BarycentricsOfEveryPixelCentreGiveItBack) {
+  std::mt19937 random(5);
+  std::uniform_real_distribution<double> coordinate(-3.0, 40.0);
+  for (int trial = 0; trial < 50; ++trial) {
+    std::array<Eigen::Vector2d, 3> t;
+    for (auto& corner : t) corner = Eigen::Vector2d(coordinate(random), coordinate(random));
+    std::set<std::pair<int, int>> plain, walked;
+    ForEachPixelCentreIn(t, 32, 24, [&](int x, int y) { plain.emplace(x, y); });
+    ForEachPixelCentreWithBarycentrics(
+        t, 32, 24, [&](int x, int y, const std::array<double, 3>& b) {
+          walked.emplace(x, y);
+          EXPECT_NEAR(b[0] + b[1] + b[2], 1.0, 1e-12);
+          const Eigen::Vector2d back = b[0] * t[0] + b[1] * t[1] + b[2] * t[2];
+          EXPECT_NEAR(back.x(), x, 1e-9);
+          EXPECT_NEAR(back.y(), y, 1e-9);
+          for (const double w : b) EXPECT_GE(w, -1e-9);
+        });
+    EXPECT_EQ(walked, plain) << trial;
+  }
+  int visits = 0;
+  ForEachPixelCentreWithBarycentrics(
+      {Eigen::Vector2d(1, 1), Eigen::Vector2d(5, 5), Eigen::Vector2d(9, 9)}, 32, 24,
+      [&](int, int, const std::array<double, 3>&) { ++visits; });
+  EXPECT_EQ(visits, 0);
+}
+
 TEST(RasterTest, TheNearerFaceWinsWhateverTheOrder) {
   const CameraModel camera = Pinhole();
   // Two overlapping squares' worth of triangles: one at 1 m, one at 2 m, offset sideways.
