@@ -24,9 +24,7 @@
 #include "carousel/sim/scene.h"
 #include "carousel/texture/atlas.h"
 #include "carousel/texture/export.h"
-#include "carousel/texture/held_out.h"
 #include "carousel/texture/texture_map.h"
-#include "carousel/texture/textured_model.h"
 
 namespace carousel::bench {
 namespace {

@@ -1,13 +1,14 @@
 // texture_bench --blob: the texture stage on a scene nothing was tuned on (issue 26). A noisy
 // marching-cubes blob (MakeRandomBlob, ~50k faces, 0.25 m across) with a procedural albedo
-// (value noise in 3D: colour regions of a few centimetres, bands and millimetre detail),
+// (value noise in 3D: colour regions of a few centimetres, bands 5 mm apart, fractal detail
+// from 6 mm down to 0.05 mm),
 // photographed unlit by 12 cameras of 800x600 on an icosahedron around it, each photo with
 // sensor noise and its own exposure gain (uniform within +-10 %), and no masks: a dataset
 // imported with its mesh given. The mesh is textured as `carousel texture` does (front views,
-// automatic size, transfer with gains and seam blending) and scored against the truth: the
-// model rendered through 8 other cameras (the cube's corners) against the true albedo's
-// rendering, over both silhouettes, after one least-squares gain per channel (the photos'
-// common level is arbitrary): "gain-compensated PSNR vs the true albedo".
+// automatic size, transfer with gains and seam blending) and scored against the truth: at
+// 400k points spread uniformly over the surface (by area), the texture sampled bilinearly at
+// the point's UV against the true albedo there, after one least-squares gain per channel (the
+// photos' common level is arbitrary): "gain-compensated PSNR vs the true albedo".
 //
 // The loss is accounted for step by step, each a full texturing run on the same mesh:
 //   ideal      the true albedo written into our atlas at the automatic size (what the atlas's

@@ -391,9 +391,8 @@ PackingResult PackCharts(const std::vector<std::array<Eigen::Vector2d, 3>>& uv,
       if (random() % 3 == 0) std::swap(shuffled[k], shuffled[k + 1]);
     orders.push_back(std::move(shuffled));
   }
-  // Whether the charts fit at a density: Tetris-like in the first order (charts interlock), or
-  // as boxes in any of the orders.
-  // Packer k: 0 Tetris-like in the first order, k >= 1 as boxes in orders[k - 1].
+  // Packer k: 0 Tetris-like in the first order (charts interlock), k >= 1 as boxes in
+  // orders[k - 1]. The charts fit at a density when any of them places them all.
   const int packers = 1 + static_cast<int>(orders.size());
   long work = 0;  // charts placed by all packer runs so far
   auto try_packer = [&](int k, double density, Layout* layout) {
