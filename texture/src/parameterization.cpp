@@ -6,6 +6,7 @@
 #include <limits>
 #include <mutex>
 #include <numbers>
+#include <numeric>
 #include <unordered_map>
 
 #include <Eigen/Geometry>
@@ -29,8 +30,9 @@ using SparseMatrix = Eigen::SparseMatrix<double>;
 using Triplet = Eigen::Triplet<double>;
 
 constexpr double kPi = std::numbers::pi;
-constexpr double kMinAngle = 0.0175;  // radians (1 degree): slivers are clamped to this
-constexpr int kRectifySteps = 4;      // rectification steps at most
+constexpr double kMinAngle = 0.0175;      // radians (1 degree): slivers are clamped to this
+constexpr int kRectifySteps = 4;          // rectification steps at most
+constexpr double kUnbendBelowFill = 0.6;  // charts filling less of their box: unbending tried
 
 // One chart in local indices.
 struct Chart {
@@ -141,27 +143,65 @@ bool SolveAbf(const FaceGraph& g, const Chart& chart, const ParameterizationOpti
   for (int i = 0; i < n; ++i) d[i] = 0.5 * beta[i] * beta[i];
   Eigen::VectorXd d1(nf);  // J1 D J1^T, diagonal
   for (int i = 0; i < nf; ++i) d1[i] = d[3 * i] + d[3 * i + 1] + d[3 * i + 2];
+  const Eigen::VectorXd inv_d1 = d1.cwiseInverse();
+
+  // J2's rows touch a face's own 3 columns only: per face, the rows of its corners' vertices
+  // (k: the angle sum around corner k's vertex; 3 + k: its sine condition; -1 on the boundary).
+  // The Schur complement S = J2 D J2^T - B D1^-1 B^T (B = J2 D J1^T) is then a sum of one
+  // small dense block per face, assembled straight into S's lower triangle, whose pattern,
+  // ordering and symbolic factorization are computed once.
+  std::vector<std::array<int, 6>> rows(nf);
+  for (int i = 0; i < nf; ++i)
+    for (int k = 0; k < 3; ++k) {
+      const int row = row_of[chart.corners[i][k]];
+      rows[i][k] = row;
+      rows[i][3 + k] = row < 0 ? -1 : interior + row;
+    }
+  SparseMatrix s;
+  std::vector<int> slot;  // per face and row pair (lower triangle), S's value index
+  Eigen::SimplicialLDLT<SparseMatrix> solver;
+  if (interior > 0) {
+    std::vector<Triplet> pattern;
+    pattern.reserve(static_cast<std::size_t>(21) * nf);
+    for (int i = 0; i < nf; ++i)
+      for (int p = 0; p < 6; ++p)
+        for (int q = 0; q < 6; ++q)
+          if (rows[i][p] >= 0 && rows[i][q] >= 0 && rows[i][p] >= rows[i][q])
+            pattern.emplace_back(rows[i][p], rows[i][q], 0.0);
+    s.resize(2 * interior, 2 * interior);
+    s.setFromTriplets(pattern.begin(), pattern.end());
+    s.makeCompressed();
+    slot.reserve(pattern.size());
+    for (const Triplet& t : pattern) {
+      const int* begin = s.innerIndexPtr() + s.outerIndexPtr()[t.col()];
+      const int* end = s.innerIndexPtr() + s.outerIndexPtr()[t.col() + 1];
+      slot.push_back(static_cast<int>(std::lower_bound(begin, end, t.row()) - s.innerIndexPtr()));
+    }
+    solver.analyzePattern(s);
+  }
+  std::vector<std::array<double, 18>> jacobian(nf);  // per face, J2's 6 x 3 block, row-major
+  std::vector<std::array<double, 6>> jd(nf);         // per face, J2's block times D
 
   for (int iteration = 0; iteration < options.max_abf_iterations; ++iteration) {
     std::vector<double>& a = *alpha;
-    // Constraint values.
+    // Constraint values and J2's blocks.
     Eigen::VectorXd c1(nf);
     for (int i = 0; i < nf; ++i) c1[i] = a[3 * i] + a[3 * i + 1] + a[3 * i + 2] - kPi;
     Eigen::VectorXd c2 = Eigen::VectorXd::Zero(2 * interior);
-    std::vector<Triplet> j2;
-    j2.reserve(static_cast<std::size_t>(9) * nf);
     for (int i = 0; i < nf; ++i) {
+      std::array<double, 18>& j = jacobian[i];
+      j.fill(0.0);
       for (int k = 0; k < 3; ++k) {
-        const int row = row_of[chart.corners[i][k]];
+        const int row = rows[i][k];
         if (row < 0) continue;
-        const int here = 3 * i + k;
-        const int next = 3 * i + (k + 1) % 3;
-        const int prev = 3 * i + (k + 2) % 3;
-        c2[row] += a[here];
-        j2.emplace_back(row, here, 1.0);
-        c2[interior + row] += std::log(std::sin(a[next])) - std::log(std::sin(a[prev]));
-        j2.emplace_back(interior + row, next, 1.0 / std::tan(a[next]));
-        j2.emplace_back(interior + row, prev, -1.0 / std::tan(a[prev]));
+        const int next = (k + 1) % 3;
+        const int prev = (k + 2) % 3;
+        c2[row] += a[3 * i + k];
+        j[3 * k + k] = 1.0;
+        c2[rows[i][3 + k]] +=
+            std::log(std::sin(a[3 * i + next])) - std::log(std::sin(a[3 * i + prev]));
+        j[3 * (3 + k) + next] = 1.0 / std::tan(a[3 * i + next]);
+        j[3 * (3 + k) + prev] = -1.0 / std::tan(a[3 * i + prev]);
       }
     }
     for (int row = 0; row < interior; ++row) c2[row] -= 2 * kPi;
@@ -184,33 +224,50 @@ bool SolveAbf(const FaceGraph& g, const Chart& chart, const ParameterizationOpti
         for (int k = 0; k < 3; ++k)
           step[3 * i + k] = -offset[3 * i + k] - d[3 * i + k] * lambda1[i];
     } else {
-      SparseMatrix jj2(2 * interior, n);
-      jj2.setFromTriplets(j2.begin(), j2.end());
-      const Eigen::VectorXd r2 = c2 - jj2 * offset;
-      // B = J2 D J1^T: row of J2 times D, summed per face.
-      const SparseMatrix j2d = jj2 * d.asDiagonal();
-      std::vector<Triplet> b_entries;
-      b_entries.reserve(j2d.nonZeros());
-      for (int col = 0; col < j2d.outerSize(); ++col)
-        for (SparseMatrix::InnerIterator it(j2d, col); it; ++it)
-          b_entries.emplace_back(it.row(), col / 3, it.value());
-      SparseMatrix b(2 * interior, nf);
-      b.setFromTriplets(b_entries.begin(), b_entries.end());
-      const Eigen::VectorXd inv_d1 = d1.cwiseInverse();
-      // Schur complement S = J2 D J2^T - B D1^-1 B^T, symmetric positive definite.
-      const SparseMatrix s = SparseMatrix(j2d * jj2.transpose()) -
-                             SparseMatrix(b * inv_d1.asDiagonal() * b.transpose());
-      Eigen::SimplicialLDLT<SparseMatrix> solver(s);
+      // S, and the right-hand side r2 - B D1^-1 r1 with r2 = C2 - J2 (alpha - beta).
+      std::fill(s.valuePtr(), s.valuePtr() + s.nonZeros(), 0.0);
+      Eigen::VectorXd rhs = c2;
+      std::size_t next_slot = 0;
+      for (int i = 0; i < nf; ++i) {
+        const std::array<double, 18>& j = jacobian[i];
+        for (int p = 0; p < 6; ++p) {
+          jd[i][p] = 0.0;
+          if (rows[i][p] < 0) continue;
+          double moved = 0.0;
+          for (int k = 0; k < 3; ++k) {
+            jd[i][p] += j[3 * p + k] * d[3 * i + k];
+            moved += j[3 * p + k] * offset[3 * i + k];
+          }
+          rhs[rows[i][p]] -= moved + jd[i][p] * inv_d1[i] * r1[i];
+        }
+        for (int p = 0; p < 6; ++p)
+          for (int q = 0; q < 6; ++q) {
+            if (rows[i][p] < 0 || rows[i][q] < 0 || rows[i][p] < rows[i][q]) continue;
+            double value = -jd[i][p] * jd[i][q] * inv_d1[i];
+            for (int k = 0; k < 3; ++k) value += j[3 * p + k] * d[3 * i + k] * j[3 * q + k];
+            s.valuePtr()[slot[next_slot++]] += value;
+          }
+      }
+      solver.factorize(s);
       if (solver.info() != Eigen::Success) return false;
-      const Eigen::VectorXd lambda2 = solver.solve(r2 - b * inv_d1.cwiseProduct(r1));
+      const Eigen::VectorXd lambda2 = solver.solve(rhs);
       if (solver.info() != Eigen::Success || !lambda2.allFinite()) return false;
-      lambda1 = inv_d1.cwiseProduct(r1 - b.transpose() * lambda2);
-      const Eigen::VectorXd j2t = jj2.transpose() * lambda2;
-      for (int i = 0; i < nf; ++i)
+      for (int i = 0; i < nf; ++i) {
+        // lambda1 = D1^-1 (r1 - B^T lambda2); the step -offset - D (J1^T lambda1 + J2^T lambda2).
+        double bt = 0.0;
+        std::array<double, 3> j2t = {0.0, 0.0, 0.0};
+        for (int p = 0; p < 6; ++p) {
+          if (rows[i][p] < 0) continue;
+          const double l = lambda2[rows[i][p]];
+          bt += jd[i][p] * l;
+          for (int k = 0; k < 3; ++k) j2t[k] += jacobian[i][3 * p + k] * l;
+        }
+        lambda1[i] = inv_d1[i] * (r1[i] - bt);
         for (int k = 0; k < 3; ++k) {
           const int c = 3 * i + k;
-          step[c] = -offset[c] - d[c] * (lambda1[i] + j2t[c]);
+          step[c] = -offset[c] - d[c] * (lambda1[i] + j2t[k]);
         }
+      }
     }
     if (!step.allFinite()) return false;
     // Only kept inside (0, pi), where log sin is defined; the energy keeps them near beta.
@@ -438,62 +495,49 @@ std::vector<int> BoundaryLoop(const FaceGraph& g, const Chart& chart,
   return loop;
 }
 
-// The displacement of every vertex that takes the chart onto its minimum-area rectangle: the
-// boundary's (the loop vertices nearest the rectangle's corners onto them, arc length kept
-// between them; ear tips excepted), the interior's and the ear tips' by mean-value harmonic
-// interpolation. Returns empty when the boundary cannot be matched to the rectangle (corners
-// out of order) or the solve fails.
-std::vector<Eigen::Vector2d> RectifyingShift(const Chart& chart, const std::vector<int>& loop,
-                                             const std::vector<Eigen::Vector2d>& uv) {
-  std::vector<cv::Point2f> points;
-  points.reserve(loop.size());
-  for (const int v : loop)
-    points.emplace_back(static_cast<float>(uv[v].x()), static_cast<float>(uv[v].y()));
-  const cv::RotatedRect box = cv::minAreaRect(points);
-  const Eigen::Rotation2Dd turn(box.angle * kPi / 180.0);
-  const Eigen::Vector2d centre(box.center.x, box.center.y);
-  const Eigen::Vector2d half(0.5 * box.size.width, 0.5 * box.size.height);
-  const std::array<Eigen::Vector2d, 4> corners = {
-      Eigen::Vector2d(-half.x(), -half.y()), Eigen::Vector2d(half.x(), -half.y()),
-      Eigen::Vector2d(half.x(), half.y()), Eigen::Vector2d(-half.x(), half.y())};
+// A harmonic solve's factorization, kept from one call to the next: the Laplacian's pattern
+// depends on which vertices are unknown only, so its ordering and symbolic analysis are
+// computed again only when they change.
+struct HarmonicSolver {
+  Eigen::SparseLU<SparseMatrix> lu;
+  std::vector<int> unknown;  // of the pattern analysed; empty before the first
+};
+
+// The displacement of every vertex that takes the chart's boundary onto a rectangle: the loop
+// vertices loop[at[c]] onto the rectangle's corners[c] (counter-clockwise, in the chart's
+// frame), the ones between by arc length along its sides, ear tips excepted; the interior's
+// and the ear tips' by mean-value harmonic interpolation. With a convex boundary and positive
+// weights the map is one-to-one (Floater 2003), but for faces whose three corners go onto one
+// side and ear tips whose offset from their neighbours does not turn with the side: with
+// `keep_triangles` (a large deformation) the middle one of such three is excepted as well, and
+// an excepted vertex between two pulled ones keeps its triangle with them (a similarity).
+// Returns empty when the solve fails.
+std::vector<Eigen::Vector2d> ShiftOntoRectangle(const Chart& chart, const std::vector<int>& loop,
+                                                const std::vector<Eigen::Vector2d>& uv,
+                                                const std::array<std::size_t, 4>& at,
+                                                const std::array<Eigen::Vector2d, 4>& corners,
+                                                bool keep_triangles, HarmonicSolver* solver) {
   const std::size_t m = loop.size();
-  std::vector<Eigen::Vector2d> q(m);  // the loop in the rectangle's frame
-  for (std::size_t i = 0; i < m; ++i) q[i] = turn.inverse() * (uv[loop[i]] - centre);
-  // Each rectangle corner's nearest loop vertex; they must come in counter-clockwise order.
-  std::array<std::size_t, 4> at{};
-  for (int c = 0; c < 4; ++c) {
-    double best = std::numeric_limits<double>::infinity();
-    for (std::size_t i = 0; i < m; ++i) {
-      const double d = (q[i] - corners[c]).squaredNorm();
-      if (d < best) {
-        best = d;
-        at[c] = i;
-      }
-    }
-  }
   auto ahead = [&](std::size_t from, std::size_t to) { return (to + m - from) % m; };
-  std::size_t travelled = 0;
-  for (int c = 0; c < 4; ++c) {
-    const std::size_t step = ahead(at[c], at[(c + 1) % 4]);
-    if (step == 0) return {};
-    travelled += step;
-  }
-  if (travelled != m) return {};
   std::vector<Eigen::Vector2d> target(m);
+  std::vector<int> side(m);      // the side each loop vertex goes onto (a corner: the next one)
+  std::vector<double> along(m);  // and where along it, 0..1
   for (int c = 0; c < 4; ++c) {
     const std::size_t steps = ahead(at[c], at[(c + 1) % 4]);
     double length = 0.0;
     for (std::size_t s = 0; s < steps; ++s)
-      length += (q[(at[c] + s + 1) % m] - q[(at[c] + s) % m]).norm();
+      length += (uv[loop[(at[c] + s + 1) % m]] - uv[loop[(at[c] + s) % m]]).norm();
     double run = 0.0;
     for (std::size_t s = 0; s < steps; ++s) {
       const std::size_t i = (at[c] + s) % m;
       const double t = length > 0.0 ? run / length : 0.0;
       target[i] = corners[c] + t * (corners[(c + 1) % 4] - corners[c]);
-      run += (q[(i + 1) % m] - q[i]).norm();
+      side[i] = c;
+      along[i] = t;
+      run += (uv[loop[(i + 1) % m]] - uv[loop[i]]).norm();
     }
   }
-  // Boundary displacements, back in the chart's frame; the interior's by a harmonic solve.
+  // Boundary displacements; the interior's by a harmonic solve.
   const std::size_t n = chart.vertices.size();
   std::vector<Eigen::Vector2d> shift(n, Eigen::Vector2d::Zero());
   std::vector<int> unknown(n, -1);
@@ -505,12 +549,51 @@ std::vector<Eigen::Vector2d> RectifyingShift(const Chart& chart, const std::vect
   std::vector<int> faces_at(n, 0);
   for (const auto& t : chart.corners)
     for (const int v : t) ++faces_at[v];
+  // Nor is the middle one of three corners of a face that would go onto one side: the face
+  // would collapse onto it.
+  std::vector<char> free(m, 0);
+  for (std::size_t i = 0; i < m; ++i) free[i] = faces_at[loop[i]] < 2 ? 1 : 0;
+  if (keep_triangles) {
+    std::vector<int> in_loop(n, -1);
+    for (std::size_t i = 0; i < m; ++i) in_loop[loop[i]] = static_cast<int>(i);
+    // Loop vertex i on side c: its own side, or a corner ending side c.
+    auto on_side = [&](int i, int c) {
+      return side[i] == c || (side[i] == (c + 1) % 4 && along[i] == 0.0);
+    };
+    for (const auto& t : chart.corners) {
+      const std::array<int, 3> i = {in_loop[t[0]], in_loop[t[1]], in_loop[t[2]]};
+      if (i[0] < 0 || i[1] < 0 || i[2] < 0) continue;
+      for (int c = 0; c < 4; ++c) {
+        if (!on_side(i[0], c) || !on_side(i[1], c) || !on_side(i[2], c)) continue;
+        auto at_side = [&](int k) { return side[i[k]] == c ? along[i[k]] : 1.0; };
+        std::array<int, 3> by = {0, 1, 2};
+        std::sort(by.begin(), by.end(), [&](int x, int y) { return at_side(x) < at_side(y); });
+        free[i[by[1]]] = 1;
+      }
+    }
+  }
+  // An excepted vertex between two that are not keeps its triangle with them (a similarity:
+  // its offset turns with the side); otherwise it moves with the interior.
+  for (std::size_t i = 0; i < m && keep_triangles; ++i) {
+    const std::size_t before = (i + m - 1) % m;
+    const std::size_t after = (i + 1) % m;
+    if (!free[i] || free[before] || free[after]) continue;
+    const Eigen::Vector2d base = uv[loop[after]] - uv[loop[before]];
+    const Eigen::Vector2d moved = target[after] - target[before];
+    const double length = base.squaredNorm();
+    if (!(length > 0.0)) continue;
+    const Eigen::Vector2d offset = uv[loop[i]] - uv[loop[before]];
+    const double a = offset.dot(base) / length;
+    const double b = Cross(base, offset) / length;
+    target[i] = target[before] + a * moved + b * Eigen::Vector2d(-moved.y(), moved.x());
+    free[i] = 2;
+  }
   for (std::size_t i = 0; i < m; ++i) {
-    if (faces_at[loop[i]] < 2) {
+    if (free[i] == 1) {
       unknown[loop[i]] = unknowns++;
       continue;
     }
-    shift[loop[i]] = turn * (target[i] - q[i]);
+    shift[loop[i]] = target[i] - uv[loop[i]];
     unknown[loop[i]] = -1;
   }
   if (unknowns > 0) {
@@ -539,21 +622,181 @@ std::vector<Eigen::Vector2d> RectifyingShift(const Chart& chart, const std::vect
       }
     SparseMatrix laplacian(unknowns, unknowns);
     laplacian.setFromTriplets(triplets.begin(), triplets.end());
-    Eigen::SparseLU<SparseMatrix> solver(laplacian);
-    if (solver.info() != Eigen::Success) return {};
-    const Eigen::MatrixX2d solved = solver.solve(rhs);
-    if (solver.info() != Eigen::Success || !solved.allFinite()) return {};
+    if (solver->unknown != unknown) {
+      solver->lu.analyzePattern(laplacian);
+      solver->unknown = unknown;
+    }
+    solver->lu.factorize(laplacian);
+    if (solver->lu.info() != Eigen::Success) return {};
+    const Eigen::MatrixX2d solved = solver->lu.solve(rhs);
+    if (solver->lu.info() != Eigen::Success || !solved.allFinite()) return {};
     for (std::size_t v = 0; v < n; ++v)
       if (unknown[v] >= 0) shift[v] = solved.row(unknown[v]).transpose();
   }
   return shift;
 }
 
+// Whether the four loop positions `at` come in counter-clockwise loop order, each after the
+// last and all distinct.
+bool InLoopOrder(const std::array<std::size_t, 4>& at, std::size_t m) {
+  std::size_t travelled = 0;
+  for (int c = 0; c < 4; ++c) {
+    const std::size_t step = (at[(c + 1) % 4] + m - at[c]) % m;
+    if (step == 0) return false;
+    travelled += step;
+  }
+  return travelled == m;
+}
+
+// The shift onto the chart's minimum-area rectangle: the loop vertices nearest its corners go
+// onto them. Empty when those come out of order.
+std::vector<Eigen::Vector2d> RectifyingShift(const Chart& chart, const std::vector<int>& loop,
+                                             const std::vector<Eigen::Vector2d>& uv,
+                                             HarmonicSolver* solver) {
+  std::vector<cv::Point2f> points;
+  points.reserve(loop.size());
+  for (const int v : loop)
+    points.emplace_back(static_cast<float>(uv[v].x()), static_cast<float>(uv[v].y()));
+  const cv::RotatedRect box = cv::minAreaRect(points);
+  const Eigen::Rotation2Dd turn(box.angle * kPi / 180.0);
+  const Eigen::Vector2d centre(box.center.x, box.center.y);
+  const Eigen::Vector2d half(0.5 * box.size.width, 0.5 * box.size.height);
+  std::array<Eigen::Vector2d, 4> corners = {
+      Eigen::Vector2d(-half.x(), -half.y()), Eigen::Vector2d(half.x(), -half.y()),
+      Eigen::Vector2d(half.x(), half.y()), Eigen::Vector2d(-half.x(), half.y())};
+  for (auto& c : corners) c = centre + turn * c;
+  // Each rectangle corner's nearest loop vertex; they must come in counter-clockwise order.
+  std::array<std::size_t, 4> at{};
+  for (int c = 0; c < 4; ++c) {
+    double best = std::numeric_limits<double>::infinity();
+    for (std::size_t i = 0; i < loop.size(); ++i) {
+      const double d = (uv[loop[i]] - corners[c]).squaredNorm();
+      if (d < best) {
+        best = d;
+        at[c] = i;
+      }
+    }
+  }
+  if (!InLoopOrder(at, loop.size())) return {};
+  return ShiftOntoRectangle(chart, loop, uv, at, corners, false, solver);
+}
+
+// The fraction of its minimum-area rectangle the chart's boundary loop covers.
+double BoxFill(const std::vector<int>& loop, const std::vector<Eigen::Vector2d>& uv) {
+  std::vector<cv::Point2f> points;
+  points.reserve(loop.size());
+  double area = 0.0;
+  for (std::size_t i = 0; i < loop.size(); ++i) {
+    const Eigen::Vector2d& p = uv[loop[i]];
+    area += 0.5 * Cross(p, uv[loop[(i + 1) % loop.size()]]);
+    points.emplace_back(static_cast<float>(p.x()), static_cast<float>(p.y()));
+  }
+  const cv::Size2f size = cv::minAreaRect(points).size;
+  const double box = static_cast<double>(size.width) * size.height;
+  return box > 0.0 ? area / box : 1.0;
+}
+
+// The shift that unbends a strip: a chart flattened into a bent band (a ring cut open, an arc
+// around a rim) fills little of its box, and no rectangle around it is one to pull it onto.
+// The band's four corners are the loop's four sharpest left turns (turning measured over
+// half the band's width, they at least that far apart); its sides go onto a rectangle whose
+// sides are the mean lengths of the opposite arcs. Empty when no four corners are found.
+std::vector<Eigen::Vector2d> UnbendingShift(const Chart& chart, const std::vector<int>& loop,
+                                            const std::vector<Eigen::Vector2d>& uv,
+                                            HarmonicSolver* solver) {
+  const std::size_t m = loop.size();
+  if (m < 4) return {};
+  std::vector<double> arc(m + 1, 0.0);  // arc length at each loop vertex, and the perimeter
+  double area = 0.0;
+  for (std::size_t i = 0; i < m; ++i) {
+    const Eigen::Vector2d& p = uv[loop[i]];
+    const Eigen::Vector2d& q = uv[loop[(i + 1) % m]];
+    arc[i + 1] = arc[i] + (q - p).norm();
+    area += 0.5 * Cross(p, q);
+  }
+  const double perimeter = arc[m];
+  if (!(area > 0.0) || !(perimeter > 0.0)) return {};
+  const double width = 2.0 * area / perimeter;  // a thin band's width
+  const double reach = 0.5 * width;
+  // The point at arc length s along the loop (cyclic).
+  auto at_length = [&](double s) {
+    s = std::fmod(s, perimeter);
+    if (s < 0.0) s += perimeter;
+    const std::size_t i =
+        std::min<std::size_t>(m - 1, std::upper_bound(arc.begin(), arc.end(), s) - arc.begin() - 1);
+    const double span = arc[i + 1] - arc[i];
+    const double t = span > 0.0 ? (s - arc[i]) / span : 0.0;
+    return Eigen::Vector2d((1.0 - t) * uv[loop[i]] + t * uv[loop[(i + 1) % m]]);
+  };
+  std::vector<std::pair<double, std::size_t>> turning(m);
+  for (std::size_t i = 0; i < m; ++i) {
+    const Eigen::Vector2d in = uv[loop[i]] - at_length(arc[i] - reach);
+    const Eigen::Vector2d out = at_length(arc[i] + reach) - uv[loop[i]];
+    turning[i] = {std::atan2(Cross(in, out), in.dot(out)), i};
+  }
+  std::sort(turning.begin(), turning.end(), std::greater<>());
+  std::vector<std::size_t> chosen;
+  for (const auto& [angle, i] : turning) {
+    if (chosen.size() == 4 || angle <= 0.0) break;
+    bool apart = true;
+    for (const std::size_t j : chosen) {
+      const double d = std::abs(arc[i] - arc[j]);
+      apart = apart && std::min(d, perimeter - d) >= reach;
+    }
+    if (apart) chosen.push_back(i);
+  }
+  if (chosen.size() < 4) return {};
+  std::sort(chosen.begin(), chosen.end());
+  const std::array<std::size_t, 4> at = {chosen[0], chosen[1], chosen[2], chosen[3]};
+  if (!InLoopOrder(at, m)) return {};
+  std::array<double, 4> side{};
+  for (int c = 0; c < 4; ++c) {
+    const double d = arc[at[(c + 1) % 4]] - arc[at[c]];
+    side[c] = d > 0.0 ? d : d + perimeter;
+  }
+  const double w = 0.5 * (side[0] + side[2]);
+  const double h = 0.5 * (side[1] + side[3]);
+  // Anywhere in the chart's frame: the area is scaled back afterwards.
+  const Eigen::Vector2d o = uv[loop[at[0]]];
+  const std::array<Eigen::Vector2d, 4> corners = {
+      o, o + Eigen::Vector2d(w, 0.0), o + Eigen::Vector2d(w, h), o + Eigen::Vector2d(0.0, h)};
+  return ShiftOntoRectangle(chart, loop, uv, at, corners, true, solver);
+}
+
 struct Flattened {
   bool valid = false;
   bool abf_converged = true;
   std::vector<Eigen::Vector2d> uv;  // per local vertex
+  // A bent band unbent (valid, filling more of its box) whose stretch is over the chart's
+  // bound: the atlas-wide stretch budget decides (empty when there is none).
+  std::vector<Eigen::Vector2d> unbent;
+  bool straightened = false;  // uv is a bent band's straightened within the bound
+  double area = 0.0;          // surface area
+  double stretch = 1.0, unbent_stretch = 1.0;
+  double fill = 1.0, unbent_fill = 1.0;  // of the minimum-area box
 };
+
+// Rectification in steps of half the remaining way, each from the last one's result, while
+// the chart stays valid and within `bound` (a step that fails is halved, twice at most). The
+// displacement is linear in the step: solved once per step.
+void Rectify(const FaceGraph& g, const Chart& chart, const std::vector<int>& chart_of_face,
+             const std::vector<int>& loop, double bound, HarmonicSolver* solver,
+             std::vector<Eigen::Vector2d>* uv) {
+  for (int step = 0; step < kRectifySteps && !loop.empty(); ++step) {
+    bool taken = false;
+    const std::vector<Eigen::Vector2d> shift = RectifyingShift(chart, loop, *uv, solver);
+    for (double amount = 0.5; amount > 0.1 && !shift.empty() && !taken; amount *= 0.5) {
+      std::vector<Eigen::Vector2d> rectified = *uv;
+      for (std::size_t v = 0; v < rectified.size(); ++v) rectified[v] += amount * shift[v];
+      ScaleToSurfaceArea(g, chart, &rectified);
+      if (!IsValid(g, chart, chart_of_face, rectified) || ChartStretch(g, chart, rectified) > bound)
+        continue;
+      *uv = std::move(rectified);
+      taken = true;
+    }
+    if (!taken) break;
+  }
+}
 
 Flattened Flatten(const FaceGraph& g, const Chart& chart, const std::vector<int>& chart_of_face,
                   const ParameterizationOptions& options) {
@@ -573,26 +816,44 @@ Flattened Flatten(const FaceGraph& g, const Chart& chart, const std::vector<int>
   out.valid =
       IsValid(g, chart, chart_of_face, out.uv) &&
       (chart.faces.size() == 1 || ChartStretch(g, chart, out.uv) <= options.max_chart_stretch);
-  if (out.valid && options.rectify_max_stretch > 1.0 && chart.faces.size() > 1) {
-    // Rectification in steps of half the remaining way, each from the last one's result,
-    // while the chart stays valid and within the bound (a step that fails is halved, twice at
-    // most). The displacement is linear in the step: solved once per step.
-    const std::vector<int> loop = BoundaryLoop(g, chart, chart_of_face);
-    const double bound = std::max(options.rectify_max_stretch, ChartStretch(g, chart, out.uv));
-    for (int step = 0; step < kRectifySteps && !loop.empty(); ++step) {
-      bool taken = false;
-      const std::vector<Eigen::Vector2d> shift = RectifyingShift(chart, loop, out.uv);
-      for (double amount = 0.5; amount > 0.1 && !shift.empty() && !taken; amount *= 0.5) {
-        std::vector<Eigen::Vector2d> rectified = out.uv;
-        for (std::size_t v = 0; v < rectified.size(); ++v) rectified[v] += amount * shift[v];
-        ScaleToSurfaceArea(g, chart, &rectified);
-        if (!IsValid(g, chart, chart_of_face, rectified) ||
-            ChartStretch(g, chart, rectified) > bound)
-          continue;
-        out.uv = std::move(rectified);
-        taken = true;
-      }
-      if (!taken) break;
+  for (const int f : chart.faces) out.area += g.areas[f];
+  if (!out.valid || !(options.rectify_max_stretch > 1.0) || chart.faces.size() == 1) return out;
+  const std::vector<int> loop = BoundaryLoop(g, chart, chart_of_face);
+  if (loop.empty()) return out;
+  const double bound = std::max(options.rectify_max_stretch, ChartStretch(g, chart, out.uv));
+  HarmonicSolver solver;
+  // A bent band is also unbent, in one step, then squared up by rectification within its own
+  // stretch.
+  std::vector<Eigen::Vector2d> unbent;
+  if (BoxFill(loop, out.uv) < kUnbendBelowFill) {
+    const std::vector<Eigen::Vector2d> shift = UnbendingShift(chart, loop, out.uv, &solver);
+    if (!shift.empty()) {
+      unbent = out.uv;
+      for (std::size_t v = 0; v < unbent.size(); ++v) unbent[v] += shift[v];
+      ScaleToSurfaceArea(g, chart, &unbent);
+      const double stretch = ChartStretch(g, chart, unbent);
+      if (!IsValid(g, chart, chart_of_face, unbent) || stretch > options.max_unbent_stretch ||
+          !(BoxFill(loop, unbent) > BoxFill(loop, out.uv)))
+        unbent.clear();
+      else
+        Rectify(g, chart, chart_of_face, loop, std::max(bound, stretch), &solver, &unbent);
+    }
+  }
+  Rectify(g, chart, chart_of_face, loop, bound, &solver, &out.uv);
+  out.stretch = ChartStretch(g, chart, out.uv);
+  out.fill = BoxFill(loop, out.uv);
+  if (!unbent.empty()) {
+    const double stretch = ChartStretch(g, chart, unbent);
+    const double fill = BoxFill(loop, unbent);
+    if (fill > out.fill && stretch <= bound) {  // better at no cost
+      out.uv = std::move(unbent);
+      out.stretch = stretch;
+      out.fill = fill;
+      out.straightened = true;
+    } else if (fill > out.fill) {
+      out.unbent = std::move(unbent);
+      out.unbent_stretch = stretch;
+      out.unbent_fill = fill;
     }
   }
   return out;
@@ -634,6 +895,18 @@ const OptionTable<ParameterizationOptions>& ParameterizationOptions::Fields() {
                    "stays under this; 1 = angle-preserving flattening only",
            .min = 1,
            .advanced = true});
+    t.Add(&O::max_unbent_stretch,
+          {.name = "unbend-stretch",
+           .help = "charts flattened into bent bands are tried straightened up to this L2 "
+                   "stretch; 1 = within rectify-stretch only",
+           .min = 1,
+           .advanced = true});
+    t.Add(&O::unbend_budget_stretch,
+          {.name = "unbend-budget",
+           .help = "straightened bands over rectify-stretch are taken while the L2 stretch of "
+                   "all charts stays under this",
+           .min = 1,
+           .advanced = true});
     return t;
   }();
   return table;
@@ -648,6 +921,8 @@ void ParameterizationOptions::Validate() const {
   finite(abf_tolerance, "abf-tolerance");
   finite(max_chart_stretch, "max-chart-stretch");
   finite(rectify_max_stretch, "rectify-stretch");
+  finite(max_unbent_stretch, "unbend-stretch");
+  finite(unbend_budget_stretch, "unbend-budget");
   CAROUSEL_THROW_IF(threads < 0, InvalidArgument,
                     "ParameterizationOptions.threads must be >= 0, got " << threads);
 }
@@ -677,6 +952,16 @@ ParameterizationResult ParameterizeCharts(const Mesh& mesh, const std::vector<in
   std::vector<int> final_chart(mesh.n_faces(), -1);
   std::size_t total_faces = mesh.n_faces();
   std::size_t faces_done = 0;
+  // The charts done: their surface area and stretch (for the L2 of all), and the straightened
+  // bands waiting for the budget.
+  struct Unbent {
+    std::vector<int> faces;
+    std::vector<std::array<Eigen::Vector2d, 3>> uv;  // per face
+    double area, stretch, unbent_stretch, fill, unbent_fill;
+  };
+  std::vector<Unbent> unbent;
+  double area_done = 0.0;
+  double stretch_sq_done = 0.0;  // sum of area x stretch^2
   // Rounds: flatten every pending chart (in parallel); split the invalid ones for the next.
   while (!pending.empty()) {
     // Chart ids for this round: unique per pending chart, in result.chart_of_face (faces of
@@ -686,8 +971,15 @@ ParameterizationResult ParameterizeCharts(const Mesh& mesh, const std::vector<in
     std::vector<Flattened> flat(pending.size());
     std::vector<Chart> local(pending.size());
     std::atomic<int> not_converged{0};
+    // Largest first: the last chart handed out is a small one, so the threads finish together.
+    std::vector<std::size_t> order(pending.size());
+    std::iota(order.begin(), order.end(), std::size_t{0});
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+      return pending[a].size() > pending[b].size();
+    });
     ParallelFor(pending.size(), 1, options.threads, [&](std::size_t begin, std::size_t end) {
-      for (std::size_t c = begin; c < end; ++c) {
+      for (std::size_t i = begin; i < end; ++i) {
+        const std::size_t c = order[i];
         progress.CheckCancelled();
         local[c] = MakeChart(graph, pending[c], result.chart_of_face);
         flat[c] = Flatten(graph, local[c], result.chart_of_face, options);
@@ -705,6 +997,22 @@ ParameterizationResult ParameterizeCharts(const Mesh& mesh, const std::vector<in
           for (int k = 0; k < 3; ++k) result.uv[f][k] = flat[c].uv[local[c].corners[i][k]];
           final_chart[f] = next_id;
           result.chart_of_face[f] = -1;  // done: never mistaken for a later round's chart
+        }
+        if (flat[c].straightened) ++result.charts_unbent;
+        area_done += flat[c].area;
+        stretch_sq_done += flat[c].area * flat[c].stretch * flat[c].stretch;
+        if (!flat[c].unbent.empty()) {
+          Unbent u{pending[c],
+                   {},
+                   flat[c].area,
+                   flat[c].stretch,
+                   flat[c].unbent_stretch,
+                   flat[c].fill,
+                   flat[c].unbent_fill};
+          u.uv.resize(pending[c].size());
+          for (std::size_t i = 0; i < pending[c].size(); ++i)
+            for (int k = 0; k < 3; ++k) u.uv[i][k] = flat[c].unbent[local[c].corners[i][k]];
+          unbent.push_back(std::move(u));
         }
         ++next_id;
         faces_done += pending[c].size();
@@ -729,6 +1037,26 @@ ParameterizationResult ParameterizeCharts(const Mesh& mesh, const std::vector<in
     depth = std::move(next_depth);
     progress.Report(faces_done, total_faces);
   }
+  // The straightened bands: most box area saved per unit of stretch^2 first, while the L2
+  // stretch of all charts stays within the budget.
+  std::sort(unbent.begin(), unbent.end(), [](const Unbent& a, const Unbent& b) {
+    auto worth = [](const Unbent& u) {
+      const double saved = u.area / u.fill - u.area / u.unbent_fill;
+      const double cost = u.area * (u.unbent_stretch * u.unbent_stretch - u.stretch * u.stretch);
+      return saved / std::max(cost, 1e-300);
+    };
+    return worth(a) > worth(b);
+  });
+  const double budget = options.unbend_budget_stretch * options.unbend_budget_stretch;
+  for (const Unbent& u : unbent) {
+    const double sum =
+        stretch_sq_done + u.area * (u.unbent_stretch * u.unbent_stretch - u.stretch * u.stretch);
+    if (!(area_done > 0.0) || sum > budget * area_done) continue;
+    stretch_sq_done = sum;
+    for (std::size_t i = 0; i < u.faces.size(); ++i) result.uv[u.faces[i]] = u.uv[i];
+    ++result.charts_unbent;
+  }
+  result.l2_stretch = area_done > 0.0 ? std::sqrt(stretch_sq_done / area_done) : 1.0;
   result.chart_of_face = std::move(final_chart);
   result.charts = next_id;
   if (result.charts_split > 0)
