@@ -195,6 +195,7 @@ double MeanBoxFill(const Mesh& mesh) {
 TEST(AtlasTest, RectifiedChartsFillTheirBoxes) {
   const Mesh blob = MakeMarchingBlob(24, 0.3, 5);
   AtlasOptions options = SmallAtlas();
+  options.packing.max_density_spread = 1.0;  // the stretch measured is the flattening's alone
   options.parameterization.rectify_max_stretch = 1.0;
   Progress progress;
   Mesh round = blob;
@@ -210,7 +211,9 @@ TEST(AtlasTest, RectifiedChartsFillTheirBoxes) {
   EXPECT_GT(rectified_fill, 0.8);
   EXPECT_GT(rectified.quality.utilization, plain.quality.utilization + 0.05);
   EXPECT_LE(rectified.quality.l2_stretch, 1.04);
-  EXPECT_EQ(rectified.quality.charts, plain.quality.charts);
+  // The same charts, but for one that still fills little of its box, split in parts.
+  EXPECT_GE(rectified.quality.charts, plain.quality.charts);
+  EXPECT_LE(rectified.quality.charts, plain.quality.charts + 2);
 }
 
 // Box packing: rectangles of assorted sizes and turns (each two triangles, a chart) fill most

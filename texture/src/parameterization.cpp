@@ -33,6 +33,12 @@ constexpr double kPi = std::numbers::pi;
 constexpr double kMinAngle = 0.0175;      // radians (1 degree): slivers are clamped to this
 constexpr int kRectifySteps = 4;          // rectification steps at most
 constexpr double kUnbendBelowFill = 0.6;  // charts filling less of their box: unbending tried
+// Charts filling less of their box after all, of kSplitMinFaces faces or more, are tried split;
+// kept split when the parts' boxes together are under kSplitGain of the chart's (the parts'
+// gutters cost room too).
+constexpr double kSplitBelowFill = 0.6;
+constexpr std::size_t kSplitMinFaces = 16;
+constexpr double kSplitGain = 0.85;
 
 // One chart in local indices.
 struct Chart {
@@ -962,6 +968,44 @@ ParameterizationResult ParameterizeCharts(const Mesh& mesh, const std::vector<in
   std::vector<Unbent> unbent;
   double area_done = 0.0;
   double stretch_sq_done = 0.0;  // sum of area x stretch^2
+  // A valid chart that still fills little of its box (a C around a concavity) is tried split
+  // in parts, flattened in the next round; the parts are kept when they are all valid and
+  // their boxes together are under kSplitGain of the chart's, else the chart as it was.
+  struct SplitTrial {
+    std::vector<int> faces;
+    std::vector<std::array<Eigen::Vector2d, 3>> uv;  // per face, the chart as it was
+    double area, stretch, fill;
+    std::vector<std::size_t> parts;  // in the next round's pending
+  };
+  std::vector<SplitTrial> trials;
+  std::vector<int> trial_of(pending.size(), -1);  // per pending chart: the trial it is a part of
+  auto per_face = [](const Chart& chart, const std::vector<Eigen::Vector2d>& uv) {
+    std::vector<std::array<Eigen::Vector2d, 3>> out(chart.faces.size());
+    for (std::size_t i = 0; i < chart.faces.size(); ++i)
+      for (int k = 0; k < 3; ++k) out[i][k] = uv[chart.corners[i][k]];
+    return out;
+  };
+  // A chart done: its UVs and its id; its stretch counted; a straightened alternative queued.
+  auto finish = [&](const std::vector<int>& faces,
+                    const std::vector<std::array<Eigen::Vector2d, 3>>& uv, double area,
+                    double stretch) {
+    for (std::size_t i = 0; i < faces.size(); ++i) {
+      result.uv[faces[i]] = uv[i];
+      final_chart[faces[i]] = next_id;
+      result.chart_of_face[faces[i]] = -1;  // done: never mistaken for a later round's chart
+    }
+    area_done += area;
+    stretch_sq_done += area * stretch * stretch;
+    ++next_id;
+    faces_done += faces.size();
+  };
+  auto finish_flat = [&](const std::vector<int>& faces, const Chart& chart, const Flattened& f) {
+    finish(faces, per_face(chart, f.uv), f.area, f.stretch);
+    if (f.straightened) ++result.charts_unbent;
+    if (!f.unbent.empty())
+      unbent.push_back({faces, per_face(chart, f.unbent), f.area, f.stretch, f.unbent_stretch,
+                        f.fill, f.unbent_fill});
+  };
   // Rounds: flatten every pending chart (in parallel); split the invalid ones for the next.
   while (!pending.empty()) {
     // Chart ids for this round: unique per pending chart, in result.chart_of_face (faces of
@@ -987,35 +1031,52 @@ ParameterizationResult ParameterizeCharts(const Mesh& mesh, const std::vector<in
       }
     });
     result.abf_not_converged += not_converged;
+    // The trials whose parts this round flattened: the parts, or the chart as it was.
+    for (SplitTrial& trial : trials) {
+      if (trial.parts.empty() || trial_of[trial.parts.front()] < 0 ||
+          &trials[trial_of[trial.parts.front()]] != &trial)
+        continue;
+      bool all_valid = true;
+      double boxes = 0.0;
+      for (const std::size_t p : trial.parts) {
+        all_valid = all_valid && flat[p].valid;
+        boxes += flat[p].area / std::max(flat[p].fill, 1e-9);
+      }
+      if (all_valid && boxes < kSplitGain * trial.area / std::max(trial.fill, 1e-9)) {
+        for (const std::size_t p : trial.parts) finish_flat(pending[p], local[p], flat[p]);
+        ++result.charts_split_for_fill;
+      } else {
+        finish(trial.faces, trial.uv, trial.area, trial.stretch);
+      }
+      trial.parts.clear();
+    }
     std::vector<std::vector<int>> next;
     std::vector<int> next_depth;
+    std::vector<int> next_trial;
     for (std::size_t c = 0; c < pending.size(); ++c) {
+      if (trial_of[c] >= 0) continue;  // a part: done above
       const bool single = pending[c].size() == 1;
-      if (flat[c].valid || (single && !flat[c].uv.empty())) {
-        for (std::size_t i = 0; i < pending[c].size(); ++i) {
-          const int f = pending[c][i];
-          for (int k = 0; k < 3; ++k) result.uv[f][k] = flat[c].uv[local[c].corners[i][k]];
-          final_chart[f] = next_id;
-          result.chart_of_face[f] = -1;  // done: never mistaken for a later round's chart
+      const Flattened& f = flat[c];
+      if (f.valid && !single && f.fill < kSplitBelowFill && !f.straightened && f.unbent.empty() &&
+          pending[c].size() >= kSplitMinFaces) {
+        const std::vector<int> parts =
+            internal::SplitChart(graph, pending[c], ChartOptions(), progress);
+        const int n_parts = *std::max_element(parts.begin(), parts.end()) + 1;
+        if (n_parts > 1) {
+          SplitTrial trial{pending[c], per_face(local[c], f.uv), f.area, f.stretch, f.fill, {}};
+          const std::size_t first = next.size();
+          next.resize(first + n_parts);
+          next_depth.resize(first + n_parts, depth[c] + 1);
+          next_trial.resize(first + n_parts, static_cast<int>(trials.size()));
+          for (std::size_t i = 0; i < parts.size(); ++i)
+            next[first + parts[i]].push_back(pending[c][i]);
+          for (int p = 0; p < n_parts; ++p) trial.parts.push_back(first + p);
+          trials.push_back(std::move(trial));
+          continue;
         }
-        if (flat[c].straightened) ++result.charts_unbent;
-        area_done += flat[c].area;
-        stretch_sq_done += flat[c].area * flat[c].stretch * flat[c].stretch;
-        if (!flat[c].unbent.empty()) {
-          Unbent u{pending[c],
-                   {},
-                   flat[c].area,
-                   flat[c].stretch,
-                   flat[c].unbent_stretch,
-                   flat[c].fill,
-                   flat[c].unbent_fill};
-          u.uv.resize(pending[c].size());
-          for (std::size_t i = 0; i < pending[c].size(); ++i)
-            for (int k = 0; k < 3; ++k) u.uv[i][k] = flat[c].unbent[local[c].corners[i][k]];
-          unbent.push_back(std::move(u));
-        }
-        ++next_id;
-        faces_done += pending[c].size();
+      }
+      if (f.valid || (single && !f.uv.empty())) {
+        finish_flat(pending[c], local[c], f);
         continue;
       }
       ++result.charts_split;
@@ -1030,11 +1091,13 @@ ParameterizationResult ParameterizeCharts(const Mesh& mesh, const std::vector<in
       const std::size_t first = next.size();
       next.resize(first + n_parts);
       next_depth.resize(first + n_parts, depth[c] + 1);
+      next_trial.resize(first + n_parts, -1);
       for (std::size_t i = 0; i < parts.size(); ++i)
         next[first + parts[i]].push_back(pending[c][i]);
     }
     pending = std::move(next);
     depth = std::move(next_depth);
+    trial_of = std::move(next_trial);
     progress.Report(faces_done, total_faces);
   }
   // The straightened bands: most box area saved per unit of stretch^2 first, while the L2
