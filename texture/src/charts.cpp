@@ -15,6 +15,11 @@
 namespace carousel::texture {
 namespace {
 
+// The initial seed count: `seeds`, or one per faces_per_seed faces up to max_seeds if more.
+int InitialSeeds(const ChartOptions& options, int faces) {
+  return std::max(options.seeds, std::min(options.max_seeds, faces / options.faces_per_seed));
+}
+
 using internal::FaceGraph;
 
 constexpr int kSmoothingPasses = 8;  // boundary straightening passes at most
@@ -390,8 +395,7 @@ class ChartGrower {
         min_dot_(std::cos(options.max_normal_deviation_deg * std::numbers::pi / 180.0)) {
     double total_area = 0.0;
     for (const double a : g_.areas) total_area += a;
-    scale_ = std::sqrt(std::max(total_area, 1e-30) /
-                       std::max(options.seeds, g_.face_count() / options.faces_per_seed));
+    scale_ = std::sqrt(std::max(total_area, 1e-30) / InitialSeeds(options, g_.face_count()));
     normals_ = SmoothedNormals(g_);
   }
 
@@ -588,6 +592,10 @@ const OptionTable<ChartOptions>& ChartOptions::Fields() {
                                .unit = "faces",
                                .min = 100,
                                .advanced = true});
+    t.Add(&O::max_seeds, {.name = "max-seeds",
+                          .help = "... and up to this many by that rule",
+                          .min = 1,
+                          .advanced = true});
     t.Add(&O::max_normal_deviation_deg,
           {.name = "chart-normal-deviation",
            .help = "a face joins a chart only if its normal is this close to the chart's",
@@ -635,7 +643,7 @@ ChartsResult ComputeCharts(const Mesh& mesh, const ChartOptions& options, Progre
   for (int f = 0; f < n; ++f) order[f] = f;
   std::shuffle(order.begin(), order.end(), random);
   std::stable_partition(order.begin(), order.end(), [&](int f) { return graph.areas[f] > 0.0; });
-  const int seed_count = std::min(n, std::max(options.seeds, n / options.faces_per_seed));
+  const int seed_count = std::min(n, InitialSeeds(options, n));
   std::vector<int> seeds(order.begin(), order.begin() + seed_count);
 
   ChartGrower grower(graph, options);
