@@ -322,8 +322,7 @@ Run TextureBlob(const Mesh& blob, const std::vector<View>& views, const Variant&
   run.patches = groups.patches;
   texture::AtlasBuilder builder(run.mesh);
   const texture::AtlasOptions atlas;
-  builder.ComputeCharts(atlas.charts, progress);
-  builder.Parameterize(atlas.parameterization, progress);
+  builder.Layout(atlas, progress);
   texture::AtlasSizeOptions size = atlas.size;
   size.size = variant.size;
   run.size =

@@ -74,8 +74,8 @@ TextureSessionResult TextureSession(const std::filesystem::path& session_folder,
 
   watch = Stopwatch();
   texture::AtlasBuilder builder(mesh);
-  result.charts = builder.ComputeCharts(options.atlas.charts, progress).charts;
-  builder.Parameterize(options.atlas.parameterization, progress);
+  builder.Layout(options.atlas, progress);
+  result.charts = builder.charts().charts;
   // The atlas side, decided once (automatic: from the faces' front photos).
   result.size = builder
                     .DecideSizeAndPack(options.atlas.packing, options.atlas.size, views,

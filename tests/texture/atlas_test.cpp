@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <limits>
 #include <map>
@@ -98,6 +99,7 @@ TEST(AtlasTest, StretchAndChartCountOnSmoothSurfaces) {
     if (m.name == "blob") continue;
     Progress progress;
     AtlasOptions options = SmallAtlas();
+    options.charts.layouts = 1;  // the same charts for both
     options.packing.max_density_spread = 1.0;
     options.parameterization.rectify_max_stretch = 1.0;
     Mesh plain_mesh = m.mesh;
@@ -195,6 +197,7 @@ double MeanBoxFill(const Mesh& mesh) {
 TEST(AtlasTest, RectifiedChartsFillTheirBoxes) {
   const Mesh blob = MakeMarchingBlob(24, 0.3, 5);
   AtlasOptions options = SmallAtlas();
+  options.charts.layouts = 1;                // the same charts for both
   options.packing.max_density_spread = 1.0;  // the stretch measured is the flattening's alone
   options.parameterization.rectify_max_stretch = 1.0;
   Progress progress;
@@ -308,6 +311,7 @@ TEST(AtlasTest, ProtrusionsAreNotStarvedOfTexels) {
       ReadMesh(std::filesystem::path(CAROUSEL_TEST_DATA_DIR) / "shoe_reconstructed_4500.ply");
   Progress progress;
   AtlasOptions options = SmallAtlas();
+  options.charts.layouts = 1;  // the layout whose protrusions starve, not another
   Mesh unlimited = shoe;
   options.parameterization.max_chart_stretch = 1e9;
   const AtlasResult starved = BuildAtlas(&unlimited, options, progress);
@@ -318,6 +322,39 @@ TEST(AtlasTest, ProtrusionsAreNotStarvedOfTexels) {
   EXPECT_LE(fed.quality.l2_stretch, 1.05);
   EXPECT_GT(starved.quality.l2_stretch, 2.0);
   EXPECT_GT(fed.charts_split, 0);
+}
+
+// A small mesh is laid out from several random seeds and the tightest packing kept: exactly
+// the best of the layouts each seed gives alone. A mesh over layout_faces is laid out once.
+TEST(AtlasTest, SmallMeshesKeepTheTightestOfSeveralLayouts) {
+  const Mesh blob = MakeRandomBlob(18, 0.3, 10);
+  Progress progress;
+  AtlasOptions options = SmallAtlas();
+  ASSERT_LE(blob.n_faces(), static_cast<std::size_t>(options.charts.layout_faces));
+  Mesh several = blob;
+  const AtlasResult kept = BuildAtlas(&several, options, progress);
+  EXPECT_EQ(kept.layouts, options.charts.layouts);
+  EXPECT_TRUE(kept.quality.Valid());
+  double best = 0.0;
+  double worst = 1.0;
+  AtlasOptions alone = options;
+  alone.charts.layouts = 1;
+  for (int layout = 0; layout < options.charts.layouts; ++layout) {
+    alone.charts.random_seed = options.charts.random_seed + layout;
+    Mesh mesh = blob;
+    const AtlasResult one = BuildAtlas(&mesh, alone, progress);
+    EXPECT_EQ(one.layouts, 1);
+    best = std::max(best, one.quality.utilization);
+    worst = std::min(worst, one.quality.utilization);
+  }
+  std::printf("%d layouts: utilization %.1f .. %.1f %%, kept %.1f %%\n", options.charts.layouts,
+              100.0 * worst, 100.0 * best, 100.0 * kept.quality.utilization);
+  EXPECT_NEAR(kept.quality.utilization, best, 1e-9);
+  EXPECT_GT(best, worst);
+
+  options.charts.layout_faces = static_cast<int>(blob.n_faces()) - 1;
+  Mesh once = blob;
+  EXPECT_EQ(BuildAtlas(&once, options, progress).layouts, 1);
 }
 
 // The paper's Fig. 11: charts turned into their oriented boxes pack tighter than axis-aligned

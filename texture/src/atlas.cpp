@@ -193,6 +193,49 @@ const ParameterizationResult& AtlasBuilder::Parameterize(const ParameterizationO
   return *flat_;
 }
 
+int AtlasBuilder::Layout(const AtlasOptions& options, Progress& progress) {
+  options.Validate();
+  const int layouts = mesh_.n_faces() <= static_cast<std::size_t>(options.charts.layout_faces)
+                          ? options.charts.layouts
+                          : 1;
+  const int side = options.size.size > 0 ? options.size.size
+                                         : std::min(kProvisionalAtlasSize, options.size.max_size);
+  std::optional<ChartsResult> best_charts;
+  std::optional<ParameterizationResult> best_flat;
+  double best_utilization = -1.0;
+  double seconds_charts = 0.0;
+  double seconds_flat = 0.0;
+  for (int layout = 0; layout < layouts; ++layout) {
+    ChartOptions charts = options.charts;
+    charts.random_seed += static_cast<std::uint64_t>(layout);
+    seconds_charts += ComputeCharts(charts, progress).seconds;
+    seconds_flat += Parameterize(options.parameterization, progress).seconds;
+    if (layouts == 1) return 1;
+    const double utilization = Pack(options.packing, side, progress).utilization;
+    if (utilization > best_utilization) {
+      best_utilization = utilization;
+      best_charts = charts_;
+      best_flat = flat_;
+    }
+  }
+  charts_ = std::move(best_charts);
+  flat_ = std::move(best_flat);
+  charts_->seconds = seconds_charts;  // all layouts'
+  flat_->seconds = seconds_flat;
+  packed_.reset();
+  return layouts;
+}
+
+const ChartsResult& AtlasBuilder::charts() const {
+  CAROUSEL_THROW_IF(!charts_, InvalidArgument, "atlas: no charts computed yet");
+  return *charts_;
+}
+
+const ParameterizationResult& AtlasBuilder::flattening() const {
+  CAROUSEL_THROW_IF(!flat_, InvalidArgument, "atlas: no charts flattened yet");
+  return *flat_;
+}
+
 const PackingResult& AtlasBuilder::Pack(const PackingOptions& options, int size,
                                         Progress& progress) {
   CAROUSEL_THROW_IF(!flat_, InvalidArgument, "atlas: flatten the charts before packing");
@@ -243,11 +286,12 @@ AtlasResult BuildAtlas(Mesh* mesh, const AtlasOptions& options, Progress& progre
   options.Validate();
   AtlasBuilder builder(*mesh);
   AtlasResult result;
-  const ChartsResult& charts = builder.ComputeCharts(options.charts, progress);
+  result.layouts = builder.Layout(options, progress);
+  const ChartsResult& charts = builder.charts();
   result.seeds_grown_into = charts.charts;
   result.chart_iterations = charts.iterations;
   result.seconds_charts = charts.seconds;
-  const ParameterizationResult& flat = builder.Parameterize(options.parameterization, progress);
+  const ParameterizationResult& flat = builder.flattening();
   result.charts_split = flat.charts_split;
   result.seconds_parameterization = flat.seconds;
   const PackingResult& packed =

@@ -618,6 +618,17 @@ const OptionTable<ChartOptions>& ChartOptions::Fields() {
     t.Add(&O::random_seed, {.name = "chart-random-seed",
                             .help = "random seed of the initial seed choice",
                             .advanced = true});
+    t.Add(&O::layouts, {.name = "chart-layouts",
+                        .help = "chart layouts tried on small meshes (from consecutive random "
+                                "seeds), the tightest packed kept",
+                        .min = 1,
+                        .max = 16,
+                        .advanced = true});
+    t.Add(&O::layout_faces, {.name = "chart-layout-faces",
+                             .help = "meshes of at most this many faces get several layouts",
+                             .unit = "faces",
+                             .min = 0,
+                             .advanced = true});
     return t;
   }();
   return table;

@@ -69,7 +69,8 @@ struct AtlasResult {
   int seeds_grown_into = 0;  // charts after growth, before splits
   int charts_split = 0;      // charts split because they did not flatten one-to-one
   int chart_iterations = 0;
-  double seconds_charts = 0.0;
+  int layouts = 1;              // chart layouts tried (AtlasBuilder::Layout)
+  double seconds_charts = 0.0;  // all layouts'
   double seconds_parameterization = 0.0;
   double seconds_packing = 0.0;
   double seconds_quality = 0.0;
@@ -83,6 +84,13 @@ class AtlasBuilder {
   const ChartsResult& ComputeCharts(const ChartOptions& options, Progress& progress);
   const ParameterizationResult& Parameterize(const ParameterizationOptions& options,
                                              Progress& progress);
+  // Charts and flattening from `options`: on a mesh of at most options.charts.layout_faces
+  // faces options.charts.layouts times, from consecutive random seeds, keeping the layout whose
+  // packing at the first side DecideSizeAndPack packs at uses the most of the atlas (the first
+  // on a tie). Returns the layouts tried; charts() and flattening() are the kept one's.
+  int Layout(const AtlasOptions& options, Progress& progress);
+  const ChartsResult& charts() const;
+  const ParameterizationResult& flattening() const;
   // Packs at side `size`, kMinAtlasSize..kMaxAtlasSize.
   const PackingResult& Pack(const PackingOptions& options, int size, Progress& progress);
   // Writes chart ids and UVs into `mesh` (the same connectivity as the builder's).
