@@ -5,7 +5,7 @@
 //
 //   atlas_bench [--faces 5000,50000,200000] [--mesh FILE] [--noise N] [--size N] [--seeds N]
 //               [--gutter N] [--max-normal-deviation DEG] [--random-seed N]
-//               [--rectify-stretch S] [--charts-image PNG] [--blobs N] [--repeat N]
+//               [--rectify-stretch S] [--charts-image PNG] [--blobs N] [--repeat N] [--layouts N]
 //
 // --blobs N: N random blobs per size (MakeRandomBlob, seeds 1..N: shapes nothing was tuned
 // on), OBB packing only, one line each and the minimum / median of utilization, L2 stretch and
@@ -102,6 +102,7 @@ int main(int argc, char** argv) {
       .Option("--max-normal-deviation", &options.charts.max_normal_deviation_deg,
               "chart normal spread, degrees")
       .Option("--random-seed", &options.charts.random_seed, "random seed of the seed choice")
+      .Option("--layouts", &options.charts.layouts, "chart layouts tried on small meshes")
       .Option("--rectify-stretch", &options.parameterization.rectify_max_stretch,
               "L2 stretch bound of rectification, 1 = none")
       .Option("--charts-image", &g_charts_image, "PNG of the last mesh's OBB atlas")
