@@ -831,7 +831,8 @@ Flattened Flatten(const FaceGraph& g, const Chart& chart, const std::vector<int>
   // A bent band is also unbent, in one step, then squared up by rectification within its own
   // stretch.
   std::vector<Eigen::Vector2d> unbent;
-  if (BoxFill(loop, out.uv) < kUnbendBelowFill) {
+  const double flattened_fill = BoxFill(loop, out.uv);
+  if (flattened_fill < kUnbendBelowFill) {
     const std::vector<Eigen::Vector2d> shift = UnbendingShift(chart, loop, out.uv, &solver);
     if (!shift.empty()) {
       unbent = out.uv;
@@ -839,7 +840,7 @@ Flattened Flatten(const FaceGraph& g, const Chart& chart, const std::vector<int>
       ScaleToSurfaceArea(g, chart, &unbent);
       const double stretch = ChartStretch(g, chart, unbent);
       if (!IsValid(g, chart, chart_of_face, unbent) || stretch > options.max_unbent_stretch ||
-          !(BoxFill(loop, unbent) > BoxFill(loop, out.uv)))
+          !(BoxFill(loop, unbent) > flattened_fill))
         unbent.clear();
       else
         Rectify(g, chart, chart_of_face, loop, std::max(bound, stretch), &solver, &unbent);
@@ -1031,11 +1032,10 @@ ParameterizationResult ParameterizeCharts(const Mesh& mesh, const std::vector<in
       }
     });
     result.abf_not_converged += not_converged;
-    // The trials whose parts this round flattened: the parts, or the chart as it was.
+    // The trials whose parts this round flattened (the last round's, the only ones with parts
+    // left): the parts, or the chart as it was.
     for (SplitTrial& trial : trials) {
-      if (trial.parts.empty() || trial_of[trial.parts.front()] < 0 ||
-          &trials[trial_of[trial.parts.front()]] != &trial)
-        continue;
+      if (trial.parts.empty()) continue;
       bool all_valid = true;
       double boxes = 0.0;
       for (const std::size_t p : trial.parts) {
