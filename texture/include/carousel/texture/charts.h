@@ -52,8 +52,9 @@ struct ChartOptions {
   // On meshes of at most layout_faces faces, >= 0, the charts are laid out this many times,
   // 1..16, from random seeds random_seed, random_seed + 1, ..., and the layout that packs
   // tightest is kept (AtlasBuilder::Layout): with few charts, how well their boxes pack varies
-  // a lot with where they start (random 5k-face blobs, 10 charts: utilization 72.6 .. 87.8 %
-  // over 5 seeds), and a small mesh's layout takes a few hundredths of a second.
+  // a lot with where they start (random 5k-face blobs, 10 charts: one blob's utilization
+  // 72.6 .. 80.4 % over 5 seeds), and a small mesh's layout takes a few hundredths of a
+  // second.
   int layouts = 5;
   int layout_faces = 20000;
   // The description of every field above (core/options.h): flags, widgets, range checks.
