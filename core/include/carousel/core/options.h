@@ -88,6 +88,17 @@ void CheckOptionChoice(const OptionInfo& info, const std::string& value);
 // Throws std::logic_error for a malformed table (a name twice, empty, not a flag name).
 void CheckOptionName(const std::vector<std::string>& taken, const std::string& name);
 
+// A value as a person types it (a GUI's text field, a front end's --name VALUE without CLI11):
+// numbers parsed whole ("12", "0.5", "1e-3"; "12abc" is refused), bools "true"/"false"/"1"/"0"/
+// "on"/"off", lists comma-separated. \throw InvalidArgument("--<name> takes <kind>, got '<text>'").
+// Range checks are the options' Validate()'s.
+int ParseOptionInt(const OptionInfo& info, const std::string& text);
+double ParseOptionDouble(const OptionInfo& info, const std::string& text);
+std::uint64_t ParseOptionUint64(const OptionInfo& info, const std::string& text);
+bool ParseOptionBool(const OptionInfo& info, const std::string& text);
+std::vector<int> ParseOptionIntList(const OptionInfo& info, const std::string& text);
+std::vector<double> ParseOptionDoubleList(const OptionInfo& info, const std::string& text);
+
 template <typename Owner>
 class OptionTable {
  public:
@@ -227,5 +238,65 @@ class OptionTable {
 
   std::vector<Field> fields_;
 };
+
+// A field's value as text, the way SetOptionText reads it back.
+template <typename Owner>
+std::string GetOptionText(const OptionField<Owner>& field, const Owner& object) {
+  if (field.is_choice()) return field.text_get(object);
+  Owner& o = const_cast<Owner&>(object);  // read only: the refs are not const-qualified
+  return std::visit(
+      [](auto* value) -> std::string {
+        using T = std::remove_pointer_t<decltype(value)>;
+        if constexpr (std::is_same_v<T, bool>) {
+          return *value ? "true" : "false";
+        } else if constexpr (std::is_same_v<T, std::string>) {
+          return *value;
+        } else if constexpr (std::is_same_v<T, std::filesystem::path>) {
+          return value->string();
+        } else if constexpr (std::is_same_v<T, std::vector<int>> ||
+                             std::is_same_v<T, std::vector<double>>) {
+          std::string text;
+          for (std::size_t i = 0; i < value->size(); ++i) {
+            if (i > 0) text += ',';
+            text += OptionNumberText(static_cast<double>((*value)[i]));
+          }
+          return text;
+        } else {
+          return OptionNumberText(static_cast<double>(*value));
+        }
+      },
+      field.ref(o));
+}
+
+// Sets a field from text as typed (the Parse* functions above; enums and composite values
+// through their own text). \throw InvalidArgument naming the flag.
+template <typename Owner>
+void SetOptionText(const OptionField<Owner>& field, Owner& object, const std::string& text) {
+  if (field.is_choice()) {
+    field.text_set(object, text);
+    return;
+  }
+  std::visit(
+      [&](auto* value) {
+        using T = std::remove_pointer_t<decltype(value)>;
+        const OptionInfo& info = field.info;
+        if constexpr (std::is_same_v<T, int>) {
+          *value = ParseOptionInt(info, text);
+        } else if constexpr (std::is_same_v<T, double>) {
+          *value = ParseOptionDouble(info, text);
+        } else if constexpr (std::is_same_v<T, bool>) {
+          *value = ParseOptionBool(info, text);
+        } else if constexpr (std::is_same_v<T, std::uint64_t>) {
+          *value = ParseOptionUint64(info, text);
+        } else if constexpr (std::is_same_v<T, std::vector<int>>) {
+          *value = ParseOptionIntList(info, text);
+        } else if constexpr (std::is_same_v<T, std::vector<double>>) {
+          *value = ParseOptionDoubleList(info, text);
+        } else {
+          *value = text;
+        }
+      },
+      field.ref(object));
+}
 
 }  // namespace carousel
