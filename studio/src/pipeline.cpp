@@ -256,7 +256,9 @@ ProcessResult ProcessSession(const std::filesystem::path& folder, Session& sessi
   if (!result.publish_reason.empty()) {
     CAROUSEL_LOG_INFO(folder.string() << ": publish runs (" << result.publish_reason << ")");
     Stopwatch watch;
+    progress.BeginStage("publish");
     result.publish = PublishSession(folder, session, options.publish, progress);
+    progress.EndStage();
     session.stages[kPublish] = "done";
     result.seconds_publish = watch.ElapsedSeconds();
     RecordInputs(folder, session, kPublish, publish_inputs, result.seconds_publish);
