@@ -1,0 +1,162 @@
+// carousel-studio as a photographer and an operator run it: the real window (GLFW, Dear ImGui,
+// OpenGL 3.3) under Xvfb with Mesa's llvmpipe, pressed by its --autorun, judged on the session
+// folders it leaves and on its screenshots' pixels.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <map>
+#include <set>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "carousel/gui/studio_args.h"
+#include "carousel/studio/checksum.h"
+#include "carousel/studio/session.h"
+#include "carousel/testing/testing.h"
+
+namespace carousel::gui {
+namespace {
+
+// Small photos: 6 stops at 360x240 with view 1 held out; publishing at sizes that suit them.
+const char* kCapture =
+    " --size 360x240 --views 6 --exclude-views 1 --spin-size 240 --hero-size 480"
+    " --poster-size 240 --cutout-size 480";
+
+std::string Studio() { return (testing::BinDir() / "carousel-studio").string(); }
+
+// The window on a virtual X display of its own (xvfb-run picks a free display number).
+testing::ShellResult RunWindow(const std::string& args) {
+  return testing::RunShell("xvfb-run -a -s '-screen 0 1280x800x24' " + Studio() + " --data " +
+                           testing::SharedDataDir().string() + " " + args + " 2>&1");
+}
+
+std::set<std::string> FilesUnder(const std::filesystem::path& folder) {
+  std::set<std::string> files;
+  for (const auto& e : std::filesystem::recursive_directory_iterator(folder))
+    if (e.is_regular_file()) files.insert(std::filesystem::relative(e.path(), folder).string());
+  return files;
+}
+
+std::vector<std::filesystem::path> Screenshots(const std::filesystem::path& folder) {
+  std::vector<std::filesystem::path> shots;
+  for (const auto& e : std::filesystem::directory_iterator(folder))
+    if (e.path().extension() == ".png") shots.push_back(e.path());
+  std::sort(shots.begin(), shots.end());
+  return shots;
+}
+
+// The model view is the region painted in its clear colour (41, 43, 48) where the model does
+// not cover it: its bounding box, and within it the fraction the model covers and how much the
+// model's colours vary.
+struct ModelViewPixels {
+  cv::Rect box;
+  double coverage = 0.0;
+  double colour_stddev = 0.0;  // mean over the channels, of the covered pixels
+};
+
+ModelViewPixels MeasureModelView(const cv::Mat& bgr) {
+  cv::Mat background;
+  cv::inRange(bgr, cv::Scalar(47, 42, 40), cv::Scalar(50, 45, 42), background);
+  ModelViewPixels out;
+  std::vector<cv::Point> points;
+  cv::findNonZero(background, points);
+  if (points.size() < 1000) return out;
+  out.box = cv::boundingRect(points);
+  const cv::Mat region = bgr(out.box);
+  const cv::Mat covered = 255 - background(out.box);
+  out.coverage = cv::countNonZero(covered) / static_cast<double>(out.box.area());
+  cv::Scalar mean, stddev;
+  cv::meanStdDev(region, mean, stddev, covered);
+  out.colour_stddev = (stddev[0] + stddev[1] + stddev[2]) / 3.0;
+  return out;
+}
+
+TEST(StudioWindowTest, AutorunBuildsWhatCarouselRunBuildsAndShowsTheTexturedModel) {
+  testing::TempDir dir;
+  const testing::ShellResult cli =
+      testing::RunShell(testing::CarouselExecutable() + " run --sim --data " +
+                        testing::SharedDataDir().string() + " --product shoe-1 --out " +
+                        (dir / "cli").string() + kCapture + " 2>&1");
+  ASSERT_EQ(cli.code, 0) << cli.out;
+  const testing::ShellResult window =
+      RunWindow("--sim --product shoe-1 --out " + (dir / "gui").string() + kCapture +
+                " --autorun --quit-when-done --screenshot-dir " + (dir / "shots").string() +
+                " --frame-log " + (dir / "frames.txt").string());
+  ASSERT_EQ(window.code, 0) << window.out;
+
+  // The same session folder: the same files, the same photos, the same mesh size.
+  const std::filesystem::path a = dir / "cli" / "shoe-1", b = dir / "gui" / "shoe-1";
+  EXPECT_EQ(FilesUnder(a), FilesUnder(b));
+  const studio::Session sa = studio::ReadSession(a), sb = studio::ReadSession(b);
+  ASSERT_EQ(sa.views.size(), 6u);
+  ASSERT_EQ(sb.views.size(), sa.views.size());
+  for (std::size_t i = 0; i < sa.views.size(); ++i) {
+    EXPECT_EQ(sb.views[i].sha256, sa.views[i].sha256) << sa.views[i].image;
+    EXPECT_EQ(sb.views[i].mask_sha256, sa.views[i].mask_sha256) << sa.views[i].mask;
+    EXPECT_EQ(sb.views[i].sha256, studio::FileSha256(b / sb.views[i].image));
+  }
+  for (const char* stage : {"capture", "reconstruct", "texture", "publish"})
+    EXPECT_EQ(sb.stages.at(stage), "done") << stage;
+  // The stages ran on the same inputs (photos, cameras, options).
+  EXPECT_EQ(sb.stage_inputs, sa.stage_inputs);
+  EXPECT_EQ(sb.stage_inputs.size(), 3u);
+  for (const char* file : {"model/model.obj", "model/model.glb", "model/model.web.glb",
+                           "model/index.html", "model/report.json", "recon/mesh.ply"})
+    EXPECT_TRUE(std::filesystem::is_regular_file(b / file)) << file;
+
+  // A screenshot at each stage change, the last one showing the textured model.
+  const std::vector<std::filesystem::path> shots = Screenshots(dir / "shots");
+  ASSERT_GE(shots.size(), 6u);
+  std::set<std::string> stages_shown;
+  for (const auto& s : shots)
+    for (const char* stage : {"capture", "reconstruct", "texture", "publish"})
+      if (s.filename().string().find(stage) != std::string::npos) stages_shown.insert(stage);
+  EXPECT_EQ(stages_shown.size(), 4u);
+  EXPECT_NE(shots.back().filename().string().find("final"), std::string::npos);
+  const cv::Mat last = cv::imread(shots.back().string());
+  ASSERT_EQ(last.size(), cv::Size(1280, 800));
+  const ModelViewPixels view = MeasureModelView(last);
+  EXPECT_GT(view.box.area(), 1280 * 800 / 5) << "model view " << view.box;
+  EXPECT_GT(view.coverage, 0.08) << "model view " << view.box;
+  EXPECT_LT(view.coverage, 0.9) << "model view " << view.box;
+  EXPECT_GT(view.colour_stddev, 15.0);  // textured, not one flat colour
+  // The view before the final one is still the model (an empty view has no covered pixels).
+  const ModelViewPixels before_model = MeasureModelView(cv::imread(shots.front().string()));
+  EXPECT_LT(before_model.coverage, view.coverage);
+
+  const FrameStats frames = SummarizeFrameTimes(ReadFrameLog(dir / "frames.txt"));
+  EXPECT_GT(frames.frames, 30);
+  std::printf("frame times while the pipeline ran: %d frames, p50 %.1f ms, p99 %.1f ms, max %.1f ms\n",
+              frames.frames, frames.p50_ms, frames.p99_ms, frames.max_ms);
+}
+
+TEST(StudioWindowTest, OperatorModeBuildsTwoProductsInARowOnePressEach) {
+  testing::TempDir dir;
+  const testing::ShellResult window =
+      RunWindow("--operator --sim --product op-a --product op-b --out " + (dir / "s").string() +
+                kCapture + " --autorun --quit-when-done --screenshot-dir " +
+                (dir / "shots").string());
+  ASSERT_EQ(window.code, 0) << window.out;
+  for (const char* sku : {"op-a", "op-b"}) {
+    const studio::Session session = studio::ReadSession(dir / "s" / sku);
+    EXPECT_EQ(session.views.size(), 6u) << sku;
+    EXPECT_EQ(session.stages.at("publish"), "done") << sku;
+    EXPECT_TRUE(std::filesystem::is_regular_file(dir / "s" / sku / "model" / "model.glb"));
+    // Its result screen: a large green verdict.
+    const std::filesystem::path shot = [&] {
+      for (const auto& s : Screenshots(dir / "shots"))
+        if (s.filename().string().find(std::string(sku) + "-result") != std::string::npos)
+          return s;
+      return std::filesystem::path();
+    }();
+    ASSERT_FALSE(shot.empty()) << sku;
+    const cv::Mat image = cv::imread(shot.string());
+    cv::Mat green;
+    cv::inRange(image, cv::Scalar(80, 180, 55), cv::Scalar(100, 200, 75), green);
+    EXPECT_GT(cv::countNonZero(green), image.total() / 6) << shot;
+  }
+}
+
+}  // namespace
+}  // namespace carousel::gui
