@@ -67,11 +67,13 @@ GPhotoCamera::Impl::Impl(GPhotoCameraOptions options) : options_(std::move(optio
 GPhotoCamera::Impl::~Impl() {
   {
     std::lock_guard<std::mutex> lock(queue_mutex_);
+    // Closing says goodbye to the camera (PTP CloseSession): on the worker, where SIGPIPE is
+    // blocked, so that a camera that hung up cannot kill the process that lets go of it.
+    queue_.push_back([this] { Close(); });
     stopping_ = true;
   }
   queue_cv_.notify_all();
   worker_.join();
-  Close();
   gp_context_unref(context_);
 }
 
