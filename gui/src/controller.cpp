@@ -133,8 +133,7 @@ void StageTracker::Finish(bool succeeded, Clock::time_point now) {
 
 std::string AdviceFor(const std::exception& error, bool resumable) {
   const std::string resume =
-      resumable ? " Then press Resume: every verified photo is kept, nothing is retaken."
-                : "";
+      resumable ? " Then press Resume: every verified photo is kept, nothing is retaken." : "";
   if (dynamic_cast<const Cancelled*>(&error))
     return resumable ? "Stopped. Resume continues where it stopped; every verified photo is kept."
                      : "Stopped before anything was kept.";
@@ -330,12 +329,12 @@ void StudioController::StartReprocess(const std::filesystem::path& session,
   std::error_code ec;
   if (!std::filesystem::is_regular_file(session / "session.json", ec))
     throw IoError(session / "session.json", "no session.json: not a session folder");
-  Launch(JobKind::kReprocess, session.filename().string(), session,
-         [session, options = std::move(options)](Progress& progress,
-                                                 std::optional<studio::RunResult>*,
-                                                 std::optional<studio::ProcessResult>* process) {
-           *process = studio::ProcessSession(session, options, progress);
-         });
+  Launch(
+      JobKind::kReprocess, session.filename().string(), session,
+      [session, options = std::move(options)](Progress& progress, std::optional<studio::RunResult>*,
+                                              std::optional<studio::ProcessResult>* process) {
+        *process = studio::ProcessSession(session, options, progress);
+      });
 }
 
 bool ModelReady(const JobStatus& status) {

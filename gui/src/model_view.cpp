@@ -203,8 +203,7 @@ std::vector<int> HeldOutViews(const std::filesystem::path& session) {
   return views;
 }
 
-HeldOutComparison CompareHeldOutView(const std::filesystem::path& session, int view,
-                                     int max_side) {
+HeldOutComparison CompareHeldOutView(const std::filesystem::path& session, int view, int max_side) {
   const studio::Session manifest = studio::ReadSession(session);
   CAROUSEL_THROW_IF(view < 0 || view >= static_cast<int>(manifest.views.size()), InvalidArgument,
                     "view " << view << " is not one of the session's " << manifest.views.size());
@@ -224,8 +223,7 @@ HeldOutComparison CompareHeldOutView(const std::filesystem::path& session, int v
   const double scale =
       std::min(1.0, static_cast<double>(max_side) / std::max(camera.width, camera.height));
   const CameraModel scaled = scale < 1.0 ? camera.Scaled(scale) : camera;
-  const texture::TexturedModel model =
-      texture::ReadTexturedModel(session / "model" / "model.glb");
+  const texture::TexturedModel model = texture::ReadTexturedModel(session / "model" / "model.glb");
   const texture::ModelRendering rendering = texture::RenderTexturedModel(model, scaled);
   cv::Mat photo = ReadImage(session / sv.image);
   if (photo.size() != rendering.image.size())
@@ -251,7 +249,8 @@ void OrbitCamera::Pan(float dx_px, float dy_px, float height_px) {
   const Eigen::Vector3f right = view.block<1, 3>(0, 0).transpose();
   const Eigen::Vector3f up = view.block<1, 3>(1, 0).transpose();
   // Metres per pixel at the target's depth.
-  const float scale = 2.0f * distance * std::tan(Radians(fov_y_deg) * 0.5f) / std::max(height_px, 1.0f);
+  const float scale =
+      2.0f * distance * std::tan(Radians(fov_y_deg) * 0.5f) / std::max(height_px, 1.0f);
   target += (-dx_px * right + dy_px * up) * scale;
 }
 

@@ -1,8 +1,8 @@
 // The panels of carousel-studio (studio_app.h): immediate-mode drawing of the controller's
 // snapshot and of what the background loaders made ready.
 #include <algorithm>
-#include <cmath>
 #include <cfloat>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 
@@ -123,6 +123,7 @@ void StudioApp::DrawSessionPanel(const JobStatus& job, float) {
   } else if (job.resumable) {
     if (ImGui::Button("Resume", ImVec2(-1.0f, 0.0f))) {
       try {
+        rig_.Disconnect();
         controller_.StartResume(job.session);
       } catch (const Error& e) {
         start_error_ = e.what();
@@ -156,8 +157,8 @@ void StudioApp::DrawPlanPanel() {
       studio::TextureSessionOptions::Fields().Only({"exclude-views"});
   OptionWidgets("texture", texture, args_.run.texture, plan_edit_, show_advanced_, busy);
   if (ImGui::TreeNode("publish")) {
-    OptionWidgets("publish", studio::PublishSessionOptions::Fields(), args_.run.publish,
-                  plan_edit_, show_advanced_, busy);
+    OptionWidgets("publish", studio::PublishSessionOptions::Fields(), args_.run.publish, plan_edit_,
+                  show_advanced_, busy);
     ImGui::TreePop();
   }
   ImGui::InputText("sessions folder", &out_text_);
@@ -168,27 +169,75 @@ void StudioApp::DrawPlanPanel() {
 }
 
 void StudioApp::DrawRigPanel() {
+  const bool busy = controller_.Busy();
   if (args_.run.hardware) {
     const studio::RigConfig& rig = *args_.run.hardware;
-    ImGui::Text("rig file %s", args_.rig.string().c_str());
-    ImGui::Text("turntable on %s", rig.turntable.port.c_str());
-    for (std::size_t i = 0; i < rig.cameras.size(); ++i)
-      ImGui::Text("camera %zu: %s %s", i, rig.cameras[i].port.c_str(),
-                  rig.cameras[i].model.c_str());
-    return;
+    ImGui::TextWrapped("rig file %s: turntable on %s, %zu camera(s)", args_.rig.string().c_str(),
+                       rig.turntable.port.c_str(), rig.cameras.size());
+  } else {
+    const studio::SimCaptureOptions& sim = args_.run.sim;
+    ImGui::TextWrapped("simulated rig: %s, %zu camera(s), %d x %d px, %d stops per turn",
+                       sim.scene.c_str(), sim.rig.elevations_deg.size(), sim.rig.width,
+                       sim.rig.height, sim.stops);
   }
-  const studio::SimCaptureOptions& sim = args_.run.sim;
-  ImGui::Text("simulated rig: %s", sim.scene.c_str());
-  ImGui::Text("%zu camera(s) at %s deg, %d x %d px", sim.rig.elevations_deg.size(),
-              [&sim] {
-                std::string text;
-                for (const double e : sim.rig.elevations_deg)
-                  text += (text.empty() ? "" : ", ") + std::to_string(static_cast<int>(e));
-                return text;
-              }()
-                  .c_str(),
-              sim.rig.width, sim.rig.height);
-  ImGui::Text("turntable: %d stops per turn", sim.stops);
+  const RigMonitorStatus status = rig_.Status();
+  using State = RigMonitorStatus::State;
+  const bool on = status.state == State::kOn || status.state == State::kConnecting;
+  if (busy) ImGui::BeginDisabled();
+  if (!on) {
+    if (ImGui::Button("Connect (live view, turntable)")) rig_.Connect(RigRequestNow());
+  } else if (ImGui::Button("Disconnect")) {
+    rig_.Disconnect();
+  }
+  if (busy) ImGui::EndDisabled();
+  if (busy) ImGui::TextColored(kDim, "the session holds the devices");
+  if (status.state == State::kConnecting) ImGui::TextColored(kDim, "connecting...");
+  if (!status.error.empty()) {
+    ImGui::PushTextWrapPos(0.0f);
+    ImGui::TextColored(kRed, "%s", status.error.c_str());
+    ImGui::PopTextWrapPos();
+  }
+  if (status.state != State::kOn) return;
+  ImGui::TextWrapped("turntable: %s", status.turntable.c_str());
+  ImGui::Text("angle %.1f deg%s%s", status.angle_deg, status.moving ? ", moving" : "",
+              status.homed ? ", homed" : ", not homed");
+  if (!status.fault.empty()) ImGui::TextColored(kRed, "fault: %s", status.fault.c_str());
+  if (ImGui::SmallButton("Identify")) rig_.Identify();
+  ImGui::SameLine();
+  if (ImGui::SmallButton("Home")) rig_.Home();
+  for (const double step : {-22.5, -5.0, 5.0, 22.5}) {
+    ImGui::SameLine();
+    char label[16];
+    std::snprintf(label, sizeof(label), "%+.1f", step);
+    if (ImGui::SmallButton(label)) rig_.Jog(step);
+  }
+  for (std::size_t c = 0; c < status.cameras.size(); ++c) {
+    ImGui::PushID(static_cast<int>(c));
+    if (ImGui::RadioButton(status.cameras[c].name.c_str(),
+                           status.live_camera == static_cast<int>(c)))
+      rig_.SetLiveCamera(static_cast<int>(c));
+    if (ImGui::TreeNode("settings")) {
+      for (const auto& [name, value] : status.cameras[c].settings) {
+        const std::string key = std::to_string(c) + "/" + name;
+        auto it = setting_edit_.try_emplace(key, value).first;
+        ImGui::SetNextItemWidth(140.0f);
+        ImGui::InputText(name.c_str(), &it->second);
+        if (ImGui::IsItemDeactivatedAfterEdit())
+          rig_.SetCameraSetting(static_cast<int>(c), name, it->second);
+        else if (!ImGui::IsItemActive())
+          it->second = value;
+      }
+      ImGui::TreePop();
+    }
+    ImGui::PopID();
+  }
+  if (live_view_ != 0) {
+    const ImVec2 size =
+        Fit(static_cast<float>(live_size_.width), static_cast<float>(live_size_.height),
+            ImVec2(ImGui::GetContentRegionAvail().x, 260.0f));
+    ImGui::Image(TextureId(live_view_), size);
+    ImGui::TextColored(kDim, "live view: %d frames, %.1f per second", status.frames, status.fps);
+  }
 }
 
 void StudioApp::DrawSessionsPanel() {
@@ -210,8 +259,7 @@ void StudioApp::DrawSessionsPanel() {
     ImGui::TableNextRow();
     ImGui::TableNextColumn();
     const bool shown = s.folder == session_;
-    if (ImGui::Selectable(s.folder.filename().string().c_str(), shown,
-                          ImGuiSelectableFlags_None))
+    if (ImGui::Selectable(s.folder.filename().string().c_str(), shown, ImGuiSelectableFlags_None))
       OpenSession(s.folder);
     if (!s.problem.empty() && ImGui::IsItemHovered()) ImGui::SetTooltip("%s", s.problem.c_str());
     ImGui::TableNextColumn();
@@ -223,6 +271,7 @@ void StudioApp::DrawSessionsPanel() {
     if (busy) ImGui::BeginDisabled();
     if (s.resumable && s.state != "complete" && ImGui::SmallButton("Resume")) {
       try {
+        rig_.Disconnect();
         controller_.StartResume(s.folder);
       } catch (const Error& e) {
         start_error_ = e.what();
@@ -237,6 +286,7 @@ void StudioApp::DrawSessionsPanel() {
           process.publish_model = args_.run.publish_model;
           process.texture = args_.run.texture;
           process.force = true;
+          rig_.Disconnect();
           controller_.StartReprocess(s.folder, process);
         } catch (const Error& e) {
           start_error_ = e.what();
@@ -262,6 +312,10 @@ void StudioApp::DrawStudio() {
   if (ImGui::CollapsingHeader("Session", ImGuiTreeNodeFlags_DefaultOpen))
     DrawSessionPanel(job, size.y);
   if (ImGui::CollapsingHeader("Capture plan")) DrawPlanPanel();
+  if (open_rig_panel_) {
+    ImGui::SetNextItemOpen(true);
+    open_rig_panel_ = false;
+  }
   if (ImGui::CollapsingHeader("Rig")) DrawRigPanel();
   if (ImGui::CollapsingHeader("Sessions", ImGuiTreeNodeFlags_DefaultOpen)) DrawSessionsPanel();
   ImGui::End();
@@ -269,8 +323,7 @@ void StudioApp::DrawStudio() {
   ImGui::SetNextWindowPos(ImVec2(viewport->WorkPos.x + kLeftWidth, viewport->WorkPos.y));
   ImGui::SetNextWindowSize(ImVec2(size.x - kLeftWidth, size.y));
   ImGui::Begin("##views", nullptr, fixed | ImGuiWindowFlags_NoTitleBar);
-  if (!session_.empty())
-    ImGui::TextColored(kDim, "session %s", session_.string().c_str());
+  if (!session_.empty()) ImGui::TextColored(kDim, "session %s", session_.string().c_str());
   if (ImGui::BeginTabBar("views")) {
     const auto flags = [this](Tab tab) {
       return select_tab_ == tab ? ImGuiTabItemFlags_SetSelected : ImGuiTabItemFlags_None;
@@ -325,9 +378,9 @@ void StudioApp::DrawModelTab() {
     ImGui::EndChild();
   } else {
     renderer_->Render(camera_, mode_, width, height);
-    ImGui::Image(TextureId(renderer_->color_texture()), ImVec2(static_cast<float>(width),
-                                                               static_cast<float>(height)),
-                 ImVec2(0, 1), ImVec2(1, 0));
+    ImGui::Image(TextureId(renderer_->color_texture()),
+                 ImVec2(static_cast<float>(width), static_cast<float>(height)), ImVec2(0, 1),
+                 ImVec2(1, 0));
     ++model_frames_;
     if (ImGui::IsItemHovered()) {
       const ImGuiIO& io = ImGui::GetIO();
@@ -363,8 +416,8 @@ void StudioApp::DrawModelTab() {
   }
   ImGui::SetNextItemWidth(-1.0f);
   ImGui::SliderFloat("##split", &split_, 0.0f, 1.0f, "photo | model");
-  const ImVec2 box = Fit(static_cast<float>(c.photo_rgba.cols), static_cast<float>(c.photo_rgba.rows),
-                         ImGui::GetContentRegionAvail());
+  const ImVec2 box = Fit(static_cast<float>(c.photo_rgba.cols),
+                         static_cast<float>(c.photo_rgba.rows), ImGui::GetContentRegionAvail());
   const ImVec2 p0 = ImGui::GetCursorScreenPos();
   ImDrawList* draw = ImGui::GetWindowDrawList();
   const float x_split = p0.x + box.x * split_;
@@ -372,8 +425,8 @@ void StudioApp::DrawModelTab() {
                  ImVec2(split_, 1));
   draw->AddImage(TextureId(held_out_render_), ImVec2(x_split, p0.y),
                  ImVec2(p0.x + box.x, p0.y + box.y), ImVec2(split_, 0), ImVec2(1, 1));
-  draw->AddLine(ImVec2(x_split, p0.y), ImVec2(x_split, p0.y + box.y),
-                IM_COL32(255, 255, 255, 200), 2.0f);
+  draw->AddLine(ImVec2(x_split, p0.y), ImVec2(x_split, p0.y + box.y), IM_COL32(255, 255, 255, 200),
+                2.0f);
   ImGui::Dummy(box);
   ImGui::TextColored(kDim, "left: the photo (%s), right: the model through its camera",
                      c.photo.c_str());
@@ -383,8 +436,8 @@ void StudioApp::DrawModelTab() {
 void StudioApp::DrawPhotosTab() {
   ImGui::Checkbox("mask overlay", &show_masks_);
   ImGui::SameLine();
-  const auto verified = std::count_if(thumbs_.begin(), thumbs_.end(),
-                                      [](const Thumb& t) { return t.info.verified; });
+  const auto verified =
+      std::count_if(thumbs_.begin(), thumbs_.end(), [](const Thumb& t) { return t.info.verified; });
   ImGui::TextColored(kDim, "%zu photos downloaded, %td verified", thumbs_.size(), verified);
   ImGui::BeginChild("thumbs");
   const float cell = 170.0f;
@@ -394,8 +447,7 @@ void StudioApp::DrawPhotosTab() {
     if (column++ % columns != 0) ImGui::SameLine();
     ImGui::BeginGroup();
     if (t.photo != 0) {
-      const ImVec2 size(static_cast<float>(t.info.rgba.cols > 0 ? t.info.rgba.cols : 160),
-                        120.0f);
+      const ImVec2 size(static_cast<float>(t.info.rgba.cols > 0 ? t.info.rgba.cols : 160), 120.0f);
       const ImVec2 p0 = ImGui::GetCursorScreenPos();
       ImGui::Image(TextureId(t.photo), ImVec2(160.0f, 107.0f));
       if (show_masks_ && t.mask != 0)
@@ -455,7 +507,8 @@ void StudioApp::DrawReportTab() {
     ImGui::BulletText("%s: %.1f s", stage.c_str(), seconds);
   if (report_.is_object() && report_.contains("seconds")) {
     const nlohmann::json& s = report_["seconds"];
-    ImGui::TextColored(kDim, "texture: grouping %.2f s, atlas %.2f s, transfer %.2f s, export %.2f s",
+    ImGui::TextColored(kDim,
+                       "texture: grouping %.2f s, atlas %.2f s, transfer %.2f s, export %.2f s",
                        s.value("grouping", 0.0), s.value("atlas", 0.0), s.value("transfer", 0.0),
                        s.value("export", 0.0));
   }
@@ -465,9 +518,9 @@ void StudioApp::DrawOperator() {
   const ImGuiViewport* viewport = ImGui::GetMainViewport();
   ImGui::SetNextWindowPos(viewport->WorkPos);
   ImGui::SetNextWindowSize(viewport->WorkSize);
-  ImGui::Begin("operator", nullptr,
-               ImGuiWindowFlags_NoDecoration | ImGuiWindowFlags_NoMove |
-                   ImGuiWindowFlags_NoSavedSettings);
+  ImGui::Begin(
+      "operator", nullptr,
+      ImGuiWindowFlags_NoDecoration | ImGuiWindowFlags_NoMove | ImGuiWindowFlags_NoSavedSettings);
   const JobStatus job = controller_.Status();
   const bool busy = job.state == JobState::kRunning;
   const float width = viewport->WorkSize.x;
@@ -479,8 +532,8 @@ void StudioApp::DrawOperator() {
     focus_sku_ = false;
   }
   if (busy) ImGui::BeginDisabled();
-  const bool enter = ImGui::InputTextWithHint("##sku", "SKU", &sku_,
-                                              ImGuiInputTextFlags_EnterReturnsTrue);
+  const bool enter =
+      ImGui::InputTextWithHint("##sku", "SKU", &sku_, ImGuiInputTextFlags_EnterReturnsTrue);
   ImGui::Spacing();
   if (ImGui::Button(busy ? "Working..." : "Capture and build",
                     ImVec2(-1.0f, viewport->WorkSize.y * 0.2f)) ||

@@ -191,10 +191,10 @@ void PhotoWatcher::Scan(const std::filesystem::path& folder) {
         cv::cvtColor(bgr, thumb.rgba, cv::COLOR_BGR2RGBA);
       }
       if (has_mask && !thumb.rgba.empty()) {
-        const cv::Mat mask = Thumbnail(ReadBytes(folder / view.mask), thumb_size_,
-                                       cv::IMREAD_GRAYSCALE, cv::IMREAD_REDUCED_GRAYSCALE_2,
-                                       cv::IMREAD_REDUCED_GRAYSCALE_4,
-                                       cv::IMREAD_REDUCED_GRAYSCALE_8, long_side);
+        const cv::Mat mask =
+            Thumbnail(ReadBytes(folder / view.mask), thumb_size_, cv::IMREAD_GRAYSCALE,
+                      cv::IMREAD_REDUCED_GRAYSCALE_2, cv::IMREAD_REDUCED_GRAYSCALE_4,
+                      cv::IMREAD_REDUCED_GRAYSCALE_8, long_side);
         if (!mask.empty()) {
           cv::Mat fitted;
           cv::resize(mask, fitted, thumb.rgba.size(), 0, 0, cv::INTER_NEAREST);

@@ -69,8 +69,10 @@ StudioApp::StudioApp(StudioArgs args) : args_(std::move(args)) {
 StudioApp::~StudioApp() {
   controller_.Cancel();
   controller_.Wait();
+  rig_.Disconnect();
   if (window_ != nullptr) {
     ClearThumbs();
+    DeleteTexture(&live_view_);
     DeleteTexture(&held_out_photo_);
     DeleteTexture(&held_out_render_);
     renderer_.reset();
@@ -138,8 +140,7 @@ int StudioApp::Run() {
   while (glfwWindowShouldClose(window_) == GLFW_FALSE && !quit_) {
     const Clock::time_point start = Clock::now();
     if (frame_log_.is_open() && frame_ > 1)
-      frame_log_ << std::chrono::duration<double, std::milli>(start - last_frame_).count()
-                 << '\n';
+      frame_log_ << std::chrono::duration<double, std::milli>(start - last_frame_).count() << '\n';
     last_frame_ = start;
     glfwPollEvents();
     Poll();
@@ -158,8 +159,7 @@ int StudioApp::Run() {
 
     // Screenshots of what was just drawn: at each stage change and at the autorun's end.
     const JobStatus job = controller_.Status();
-    if (!args_.screenshot_dir.empty() && job.stage_changes != last_stage_changes_ &&
-        job.id > 0) {
+    if (!args_.screenshot_dir.empty() && job.stage_changes != last_stage_changes_ && job.id > 0) {
       Screenshot(job.product + "-" + StageLabel(job));
     }
     last_stage_changes_ = job.stage_changes;
@@ -169,7 +169,7 @@ int StudioApp::Run() {
     // The autorun is over once every product was pressed, the last session ended and its
     // model (or result) has been on screen for half a second.
     if (args_.autorun && !autorun_done_ && autorun_next_ >= args_.products.size() &&
-        !controller_.Busy() && !autorun_waiting_model_ && idle_frames_ >= 30) {
+        last_state_ != JobState::kRunning && !autorun_waiting_model_ && idle_frames_ >= 30) {
       autorun_done_ = true;
       Screenshot("final");
       if (args_.quit_when_done) quit_ = true;
@@ -249,9 +249,8 @@ void StudioApp::StartModelLoad(const std::filesystem::path& session) {
 void StudioApp::StartHeldOutLoad(int view) {
   held_out_error_.clear();
   const std::filesystem::path session = session_;
-  held_out_loading_ = std::async(std::launch::async, [session, view] {
-    return CompareHeldOutView(session, view, 1024);
-  });
+  held_out_loading_ = std::async(
+      std::launch::async, [session, view] { return CompareHeldOutView(session, view, 1024); });
 }
 
 void StudioApp::Poll() {
@@ -291,13 +290,14 @@ void StudioApp::Poll() {
     if (job.state != JobState::kSucceeded) failures_ = true;
     if (args_.operator_mode) {
       shots_pending_.push_back(job.product + "-result");  // once the verdict is drawn
-      sku_.clear();  // ready for the next product's barcode
+      sku_.clear();                                       // ready for the next product's barcode
       focus_sku_ = true;
     }
     idle_frames_ = 0;
   }
   last_state_ = job.state;
-  ++idle_frames_;
+  // Frames since the last job ended (what the autorun waits on), as Poll has seen it.
+  idle_frames_ = job.state == JobState::kRunning ? 0 : idle_frames_ + 1;
 
   if (Ready(model_loading_)) {
     LoadedSession loaded = model_loading_.get();
@@ -333,6 +333,18 @@ void StudioApp::Poll() {
       held_out_error_ = e.what();
     }
   }
+  if (const cv::Mat frame = rig_.TakeFrame(&live_frame_seen_); !frame.empty()) {
+    if (live_view_ == 0 || frame.size() != live_size_) {
+      DeleteTexture(&live_view_);
+      live_view_ = UploadTexture(frame, false);
+      live_size_ = frame.size();
+    } else {
+      glBindTexture(GL_TEXTURE_2D, live_view_);
+      glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, frame.cols, frame.rows, GL_RGBA, GL_UNSIGNED_BYTE,
+                      frame.isContinuous() ? frame.data : frame.clone().data);
+      glBindTexture(GL_TEXTURE_2D, 0);
+    }
+  }
   for (PhotoThumb& ready : photos_.TakeReady()) {
     auto it = std::find_if(thumbs_.begin(), thumbs_.end(),
                            [&ready](const Thumb& t) { return t.info.stem == ready.stem; });
@@ -353,8 +365,17 @@ void StudioApp::Poll() {
   });
 }
 
+studio::RigRequest StudioApp::RigRequestNow() const {
+  studio::RigRequest request;
+  request.sim = args_.run.sim;
+  request.hardware = args_.run.hardware;
+  return request;
+}
+
 void StudioApp::PressButton(const std::string& sku) {
   start_error_.clear();
+  idle_frames_ = 0;
+  rig_.Disconnect();  // the session opens the same devices
   try {
     studio::RunOptions options = args_.run;
     options.product = sku;
@@ -366,9 +387,25 @@ void StudioApp::PressButton(const std::string& sku) {
 
 void StudioApp::Automate() {
   if (!args_.autorun || autorun_next_ >= args_.products.size()) return;
-  if (controller_.Busy() || autorun_waiting_model_) return;
+  if (last_state_ == JobState::kRunning || autorun_waiting_model_) return;
   // The first press once the window is up; the next once the last result has shown a while.
   if (frame_ < 5 || (autorun_next_ > 0 && idle_frames_ < 30)) return;
+  if (args_.run.hardware && autorun_next_ == 0 && live_check_ != LiveCheck::kShown) {
+    // The hardware path's demo: the live view first, then the button.
+    if (live_check_ == LiveCheck::kNone) {
+      live_check_ = LiveCheck::kWaiting;
+      live_check_start_ = Clock::now();
+      open_rig_panel_ = true;
+      rig_.Connect(RigRequestNow());
+      return;
+    }
+    const RigMonitorStatus rig = rig_.Status();
+    const bool timed_out = Clock::now() - live_check_start_ > std::chrono::seconds(60);
+    if (rig.state != RigMonitorStatus::State::kFailed && rig.frames < 3 && !timed_out) return;
+    shots_pending_.push_back("live-view");
+    live_check_ = LiveCheck::kShown;
+    return;  // the screenshot is taken at the end of this frame; the press follows
+  }
   const std::string sku = args_.products[autorun_next_++];
   sku_ = sku;
   PressButton(sku);

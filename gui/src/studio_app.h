@@ -6,8 +6,8 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
-#include <map>
 #include <future>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -17,6 +17,7 @@
 
 #include "carousel/gui/controller.h"
 #include "carousel/gui/model_view.h"
+#include "carousel/gui/rig_monitor.h"
 #include "carousel/gui/session_browser.h"
 #include "carousel/gui/studio_args.h"
 #include "model_renderer.h"
@@ -103,9 +104,16 @@ class StudioApp {
   std::vector<Thumb> thumbs_;
   bool show_masks_ = true;
   std::vector<SessionSummary> sessions_;
+  RigMonitor rig_;
+  GLuint live_view_ = 0;
+  int live_frame_seen_ = 0;
+  cv::Size live_size_;
+  bool open_rig_panel_ = false;
+  std::map<std::string, std::string> setting_edit_;  // camera setting being typed
+  studio::RigRequest RigRequestNow() const;
 
   std::string sku_;
-  std::string out_text_;  // the sessions folder as typed
+  std::string out_text_;     // the sessions folder as typed
   std::string start_error_;  // a press refused (no SKU, busy, bad setting)
   OptionEditState plan_edit_;
   bool show_advanced_ = false;
@@ -123,6 +131,9 @@ class StudioApp {
   std::size_t autorun_next_ = 0;
   int frame_ = 0, idle_frames_ = 0;
   bool autorun_waiting_model_ = false;
+  // Hardware mode: the autorun first shows the live view, then presses.
+  enum class LiveCheck { kNone, kWaiting, kShown } live_check_ = LiveCheck::kNone;
+  std::chrono::steady_clock::time_point live_check_start_{};
   bool autorun_done_ = false;
   bool quit_ = false;
   std::ofstream frame_log_;

@@ -128,10 +128,9 @@ StudioArgs ParseStudioArgs(const std::vector<std::string>& args) {
       bool needs_value = false;
       std::string text;
       // Look the name up first without consuming a value (bools take none).
-      const bool known =
-          SetFrom(tables.sim, out.run.sim, name, nullptr, &needs_value) ||
-          SetFrom(tables.texture, out.run.texture, name, nullptr, &needs_value) ||
-          SetFrom(tables.publish, out.run.publish, name, nullptr, &needs_value);
+      const bool known = SetFrom(tables.sim, out.run.sim, name, nullptr, &needs_value) ||
+                         SetFrom(tables.texture, out.run.texture, name, nullptr, &needs_value) ||
+                         SetFrom(tables.publish, out.run.publish, name, nullptr, &needs_value);
       CAROUSEL_THROW_IF(!known, InvalidArgument,
                         "unknown flag '" << arg << "' (carousel-studio --help lists them)");
       if (needs_value) {
@@ -214,8 +213,8 @@ std::vector<double> ReadFrameLog(const std::filesystem::path& file) {
     std::istringstream parse(line);
     double value = 0.0;
     if (!(parse >> value) || !(value >= 0.0))
-      throw FormatError(file, "line " + std::to_string(number) + " is not a frame time: '" +
-                                  line + "'");
+      throw FormatError(file,
+                        "line " + std::to_string(number) + " is not a frame time: '" + line + "'");
     ms.push_back(value);
   }
   return ms;

@@ -13,10 +13,27 @@ namespace carousel::gui {
 namespace {
 
 TEST(StudioArgsTest, CaptureFlagsMeanWhatTheyMeanInCarouselRun) {
-  const StudioArgs args = ParseStudioArgs(
-      {"--sim", "--scene", "bottle", "--product", "sku 1", "--out", "/tmp/x", "--size", "480x320",
-       "--views", "8", "--exclude-views", "2,5", "--no-publish", "--autorun", "--screenshot-dir",
-       "shots", "--frame-log=frames.txt", "--quit-when-done", "--spin-size", "240"});
+  const StudioArgs args = ParseStudioArgs({"--sim",
+                                           "--scene",
+                                           "bottle",
+                                           "--product",
+                                           "sku 1",
+                                           "--out",
+                                           "/tmp/x",
+                                           "--size",
+                                           "480x320",
+                                           "--views",
+                                           "8",
+                                           "--exclude-views",
+                                           "2,5",
+                                           "--no-publish",
+                                           "--autorun",
+                                           "--screenshot-dir",
+                                           "shots",
+                                           "--frame-log=frames.txt",
+                                           "--quit-when-done",
+                                           "--spin-size",
+                                           "240"});
   EXPECT_EQ(args.run.sim.scene, "bottle");
   EXPECT_EQ(args.run.product, "sku 1");
   EXPECT_EQ(args.run.out, "/tmp/x");
@@ -35,20 +52,32 @@ TEST(StudioArgsTest, CaptureFlagsMeanWhatTheyMeanInCarouselRun) {
 }
 
 TEST(StudioArgsTest, MistakesNameTheFlag) {
-  EXPECT_THAT([] { ParseStudioArgs({"--views", "many"}); },
-              ::testing::ThrowsMessage<InvalidArgument>(::testing::HasSubstr("--views")));
-  EXPECT_THAT([] { ParseStudioArgs({"--views", "0", "--product", "a"}); },
-              ::testing::ThrowsMessage<InvalidArgument>(::testing::HasSubstr("--views")));
+  EXPECT_THAT(
+      [] {
+        ParseStudioArgs({"--views", "many"});
+      },
+      ::testing::ThrowsMessage<InvalidArgument>(::testing::HasSubstr("--views")));
+  EXPECT_THAT(
+      [] {
+        ParseStudioArgs({"--views", "0", "--product", "a"});
+      },
+      ::testing::ThrowsMessage<InvalidArgument>(::testing::HasSubstr("--views")));
   EXPECT_THAT([] { ParseStudioArgs({"--frobnicate"}); },
               ::testing::ThrowsMessage<InvalidArgument>(::testing::HasSubstr("--frobnicate")));
-  EXPECT_THAT([] { ParseStudioArgs({"--out"}); },
-              ::testing::ThrowsMessage<InvalidArgument>(::testing::HasSubstr("--out needs a value")));
+  EXPECT_THAT([] { ParseStudioArgs({"--out"}); }, ::testing::ThrowsMessage<InvalidArgument>(
+                                                      ::testing::HasSubstr("--out needs a value")));
   EXPECT_THAT([] { ParseStudioArgs({"--autorun"}); },
               ::testing::ThrowsMessage<InvalidArgument>(::testing::HasSubstr("--product")));
-  EXPECT_THAT([] { ParseStudioArgs({"--product", "a", "--product", "b"}); },
-              ::testing::ThrowsMessage<InvalidArgument>(::testing::HasSubstr("--operator")));
-  EXPECT_THAT([] { ParseStudioArgs({"--sim", "--rig", "rig.json"}); },
-              ::testing::ThrowsMessage<InvalidArgument>(::testing::HasSubstr("exclude")));
+  EXPECT_THAT(
+      [] {
+        ParseStudioArgs({"--product", "a", "--product", "b"});
+      },
+      ::testing::ThrowsMessage<InvalidArgument>(::testing::HasSubstr("--operator")));
+  EXPECT_THAT(
+      [] {
+        ParseStudioArgs({"--sim", "--rig", "rig.json"});
+      },
+      ::testing::ThrowsMessage<InvalidArgument>(::testing::HasSubstr("exclude")));
   EXPECT_THAT([] { ParseStudioArgs({"shoe"}); },
               ::testing::ThrowsMessage<InvalidArgument>(::testing::HasSubstr("'shoe'")));
   // The operator presses once per product.
@@ -126,8 +155,8 @@ texture::TexturedModel TwoSquares() {
     const double x0 = k * 2 * s;
     const float u = k == 0 ? 0.5f : 0.25f;
     const int base = static_cast<int>(model.positions.size());
-    model.positions.insert(model.positions.end(), {{x0, 0, 0}, {x0 + s, 0, 0}, {x0 + s, s, 0},
-                                                   {x0, s, 0}});
+    model.positions.insert(model.positions.end(),
+                           {{x0, 0, 0}, {x0 + s, 0, 0}, {x0 + s, s, 0}, {x0, s, 0}});
     model.uvs.insert(model.uvs.end(), {{0, u}, {u, u}, {u, 0}, {0, 0}});
     model.triangles.push_back({base, base + 1, base + 2});
     model.triangles.push_back({base, base + 2, base + 3});
@@ -189,8 +218,8 @@ TEST(OrbitCameraTest, FramesOrbitsPansAndZooms) {
   camera.Pan(100.0f, 0.0f, 500.0f);
   EXPECT_GT((camera.target - old_target).norm(), 0.0f);
   // A pan moves the target along the view plane: its depth stays.
-  EXPECT_NEAR((camera.ViewMatrix() * Eigen::Vector4f(camera.target.x(), camera.target.y(),
-                                                     camera.target.z(), 1.0f))
+  EXPECT_NEAR((camera.ViewMatrix() *
+               Eigen::Vector4f(camera.target.x(), camera.target.y(), camera.target.z(), 1.0f))
                   .z(),
               -camera.distance, 1e-4f);
 }

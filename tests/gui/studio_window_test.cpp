@@ -2,17 +2,27 @@
 // OpenGL 3.3) under Xvfb with Mesa's llvmpipe, pressed by its --autorun, judged on the session
 // folders it leaves and on its screenshots' pixels.
 #include <gtest/gtest.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <cstdio>
+#include <cstdlib>
 #include <map>
 #include <set>
+#include <thread>
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "carousel/gui/session_browser.h"
 #include "carousel/gui/studio_args.h"
+#include "carousel/sim/ptpip_camera.h"
 #include "carousel/studio/checksum.h"
+#include "carousel/studio/rig_config.h"
 #include "carousel/studio/session.h"
+#include "carousel/studio/simulated_studio.h"
 #include "carousel/testing/testing.h"
 
 namespace carousel::gui {
@@ -25,10 +35,45 @@ const char* kCapture =
 
 std::string Studio() { return (testing::BinDir() / "carousel-studio").string(); }
 
-// The window on a virtual X display of its own (xvfb-run picks a free display number).
+// One virtual X server (Xvfb, Mesa's llvmpipe behind GLX) for the test binary: it picks a free
+// display number and writes it to a pipe (-displayfd); DISPLAY points the windows at it.
+class XvfbDisplay : public ::testing::Environment {
+ public:
+  void SetUp() override {
+    int fds[2];
+    ASSERT_EQ(::pipe(fds), 0);
+    const std::string fd = std::to_string(fds[1]);
+    std::vector<std::string> args = {"Xvfb",        "-displayfd", fd,    "-screen", "0",
+                                     "1280x800x24", "-nolisten",  "tcp", "-noreset"};
+    std::vector<char*> argv;
+    for (std::string& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    ASSERT_EQ(::posix_spawnp(&pid_, "Xvfb", nullptr, nullptr, argv.data(), environ), 0)
+        << "Xvfb is missing (scripts/install-deps installs it)";
+    ::close(fds[1]);
+    std::string display;
+    char c = 0;
+    while (::read(fds[0], &c, 1) == 1 && c != '\n') display += c;
+    ::close(fds[0]);
+    ASSERT_FALSE(display.empty()) << "Xvfb did not start";
+    ::setenv("DISPLAY", (":" + display).c_str(), 1);
+  }
+  void TearDown() override {
+    if (pid_ <= 0) return;
+    ::kill(pid_, SIGTERM);
+    int status = 0;
+    ::waitpid(pid_, &status, 0);
+  }
+
+ private:
+  pid_t pid_ = -1;
+};
+const auto* const kDisplay = ::testing::AddGlobalTestEnvironment(new XvfbDisplay);
+
+// The window on the virtual display.
 testing::ShellResult RunWindow(const std::string& args) {
-  return testing::RunShell("xvfb-run -a -s '-screen 0 1280x800x24' " + Studio() + " --data " +
-                           testing::SharedDataDir().string() + " " + args + " 2>&1");
+  return testing::RunShell(Studio() + " --data " + testing::SharedDataDir().string() + " " + args +
+                           " 2>&1");
 }
 
 std::set<std::string> FilesUnder(const std::filesystem::path& folder) {
@@ -74,10 +119,9 @@ ModelViewPixels MeasureModelView(const cv::Mat& bgr) {
 
 TEST(StudioWindowTest, AutorunBuildsWhatCarouselRunBuildsAndShowsTheTexturedModel) {
   testing::TempDir dir;
-  const testing::ShellResult cli =
-      testing::RunShell(testing::CarouselExecutable() + " run --sim --data " +
-                        testing::SharedDataDir().string() + " --product shoe-1 --out " +
-                        (dir / "cli").string() + kCapture + " 2>&1");
+  const testing::ShellResult cli = testing::RunShell(
+      testing::CarouselExecutable() + " run --sim --data " + testing::SharedDataDir().string() +
+      " --product shoe-1 --out " + (dir / "cli").string() + kCapture + " 2>&1");
   ASSERT_EQ(cli.code, 0) << cli.out;
   const testing::ShellResult window =
       RunWindow("--sim --product shoe-1 --out " + (dir / "gui").string() + kCapture +
@@ -127,16 +171,16 @@ TEST(StudioWindowTest, AutorunBuildsWhatCarouselRunBuildsAndShowsTheTexturedMode
 
   const FrameStats frames = SummarizeFrameTimes(ReadFrameLog(dir / "frames.txt"));
   EXPECT_GT(frames.frames, 30);
-  std::printf("frame times while the pipeline ran: %d frames, p50 %.1f ms, p99 %.1f ms, max %.1f ms\n",
-              frames.frames, frames.p50_ms, frames.p99_ms, frames.max_ms);
+  std::printf(
+      "frame times while the pipeline ran: %d frames, p50 %.1f ms, p99 %.1f ms, max %.1f ms\n",
+      frames.frames, frames.p50_ms, frames.p99_ms, frames.max_ms);
 }
 
 TEST(StudioWindowTest, OperatorModeBuildsTwoProductsInARowOnePressEach) {
   testing::TempDir dir;
-  const testing::ShellResult window =
-      RunWindow("--operator --sim --product op-a --product op-b --out " + (dir / "s").string() +
-                kCapture + " --autorun --quit-when-done --screenshot-dir " +
-                (dir / "shots").string());
+  const testing::ShellResult window = RunWindow(
+      "--operator --sim --product op-a --product op-b --out " + (dir / "s").string() + kCapture +
+      " --autorun --quit-when-done --screenshot-dir " + (dir / "shots").string());
   ASSERT_EQ(window.code, 0) << window.out;
   for (const char* sku : {"op-a", "op-b"}) {
     const studio::Session session = studio::ReadSession(dir / "s" / sku);
@@ -146,8 +190,7 @@ TEST(StudioWindowTest, OperatorModeBuildsTwoProductsInARowOnePressEach) {
     // Its result screen: a large green verdict.
     const std::filesystem::path shot = [&] {
       for (const auto& s : Screenshots(dir / "shots"))
-        if (s.filename().string().find(std::string(sku) + "-result") != std::string::npos)
-          return s;
+        if (s.filename().string().find(std::string(sku) + "-result") != std::string::npos) return s;
       return std::filesystem::path();
     }();
     ASSERT_FALSE(shot.empty()) << sku;
@@ -156,6 +199,118 @@ TEST(StudioWindowTest, OperatorModeBuildsTwoProductsInARowOnePressEach) {
     cv::inRange(image, cv::Scalar(80, 180, 55), cv::Scalar(100, 200, 75), green);
     EXPECT_GT(cv::countNonZero(green), image.total() / 6) << shot;
   }
+}
+
+// A studio in a box (what `carousel sim rig` runs): the firmware in simavr behind a PTY and two
+// PTP/IP camera emulators, 6 stops at 360x240; the window drives it through real termios and
+// real libgphoto2 from its rig file.
+class StudioWindowHardwareTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    ::setenv("HOME", home_.path().c_str(), 1);  // libgphoto2's ~/.gphoto/settings
+    studio::SimulatedStudioOptions options;
+    options.sim.data_dir = testing::SharedDataDir();
+    options.sim.rig.width = 360;
+    options.sim.rig.height = 240;
+    options.sim.stops = 6;
+    options.settle_ms = 20;
+    options.folder = dir_.path();
+    studio_ = std::make_unique<studio::SimulatedStudio>(options);
+    studio::WriteRigConfig(dir_ / "rig.json", studio_->Config());
+  }
+
+  std::string WindowArgs(const std::string& product) const {
+    return "--rig " + (dir_ / "rig.json").string() + " --product " + product + " --out " +
+           (dir_ / "sessions").string() +
+           " --exclude-views 1 --spin-size 240 --hero-size 480 --poster-size 240"
+           " --cutout-size 480 --autorun --quit-when-done --screenshot-dir " +
+           (dir_ / "shots").string();
+  }
+
+  testing::TempDir home_, dir_;
+  std::unique_ptr<studio::SimulatedStudio> studio_;
+};
+
+TEST_F(StudioWindowHardwareTest, LiveViewThenAOneButtonSessionThroughFirmwareAndLibgphoto2) {
+  const testing::ShellResult window = RunWindow(WindowArgs("hw-shoe"));
+  ASSERT_EQ(window.code, 0) << window.out;
+  // Live view: preview frames were streamed from the first camera before the session, and the
+  // Rig panel showed one (a photo of the product: not one flat colour).
+  EXPECT_GE(studio_->camera(0)->Counters().preview_frames, 3);
+  const std::vector<std::filesystem::path> shots = Screenshots(dir_ / "shots");
+  ASSERT_FALSE(shots.empty());
+  EXPECT_NE(shots.front().filename().string().find("live-view"), std::string::npos);
+  const cv::Mat live = cv::imread(shots.front().string());
+  cv::Scalar mean, stddev;
+  cv::meanStdDev(live(cv::Rect(0, 0, 440, 800)), mean, stddev);
+  EXPECT_GT(stddev[0], 30.0);  // the left column holds a photo, not only the dark panel
+  // The session: every photo came through libgphoto2 from the emulators, in order.
+  const std::filesystem::path session = dir_ / "sessions" / "hw-shoe";
+  const studio::Session manifest = studio::ReadSession(session);
+  ASSERT_EQ(manifest.views.size(), 12u);  // 6 stops x 2 cameras
+  for (int c = 0; c < 2; ++c) EXPECT_EQ(studio_->camera(c)->Photos().size(), 6u) << c;
+  for (const studio::SessionView& v : manifest.views)
+    EXPECT_EQ(studio::FileSha256(session / v.image), v.sha256) << v.image;
+  EXPECT_EQ(manifest.stages.at("publish"), "done");
+  const ModelViewPixels view = MeasureModelView(cv::imread(shots.back().string()));
+  EXPECT_GT(view.coverage, 0.08);
+  EXPECT_GT(view.colour_stddev, 15.0);
+}
+
+TEST_F(StudioWindowHardwareTest, ACameraUnpluggedDuringCaptureIsShownAndTheSessionResumes) {
+  const std::filesystem::path session = dir_ / "sessions" / "unplug";
+  testing::ShellResult window;
+  std::thread run([&] { window = RunWindow(WindowArgs("unplug")); });
+  // Pull camera 1's plug once four photos are recorded.
+  std::size_t recorded = 0;
+  for (int i = 0; i < 6000 && recorded < 4; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    try {
+      recorded = studio::ReadSession(session).views.size();
+    } catch (const Error&) {
+      continue;  // not written yet
+    }
+  }
+  studio_->UnplugCamera(1);
+  run.join();
+  ASSERT_GE(recorded, 4u);
+  EXPECT_EQ(window.code, 1) << window.out;  // the autorun's session failed
+  // The window said so: red text naming the camera, on its last screenshot.
+  const std::vector<std::filesystem::path> shots = Screenshots(dir_ / "shots");
+  ASSERT_FALSE(shots.empty());
+  const cv::Mat last = cv::imread(shots.back().string());
+  cv::Mat red;
+  cv::inRange(last(cv::Rect(0, 0, 440, 800)), cv::Scalar(60, 60, 215), cv::Scalar(95, 95, 245),
+              red);
+  EXPECT_GT(cv::countNonZero(red), 200) << shots.back();
+  EXPECT_NE(window.out.find("EMU1"), std::string::npos) << window.out;
+
+  // Nothing captured is lost, and the Sessions panel offers it for resuming.
+  const studio::Session before = studio::ReadSession(session);
+  ASSERT_LT(before.views.size(), 12u);
+  std::map<std::string, std::string> kept;
+  for (const studio::SessionView& v : before.views) {
+    EXPECT_EQ(studio::FileSha256(session / v.image), v.sha256) << v.image;
+    kept[v.image] = v.sha256;
+  }
+  const std::vector<SessionSummary> sessions = ListSessions(dir_ / "sessions");
+  ASSERT_EQ(sessions.size(), 1u);
+  EXPECT_TRUE(sessions[0].resumable);
+  EXPECT_EQ(sessions[0].state, "capturing");
+
+  // Plugged back in, the session resumes: every photo kept, the rest taken.
+  studio_->PlugInCamera(1);
+  const testing::ShellResult resumed = testing::RunShell(
+      testing::CarouselExecutable() + " run --resume " + session.string() + " 2>&1");
+  ASSERT_EQ(resumed.code, 0) << resumed.out;
+  const studio::Session after = studio::ReadSession(session);
+  EXPECT_EQ(after.views.size(), 12u);
+  for (const studio::SessionView& v : after.views) {
+    if (kept.count(v.image) != 0) {
+      EXPECT_EQ(v.sha256, kept[v.image]) << v.image;
+    }
+  }
+  EXPECT_EQ(after.stages.at("texture"), "done");
 }
 
 }  // namespace

@@ -44,9 +44,9 @@ std::optional<StageStep> StepOf(const std::string& progress_stage);
 struct StageBar {
   enum class State { kWaiting, kRunning, kDone };
   State state = State::kWaiting;
-  std::string step;           // the Progress stage running in it now ("atlas: packing")
-  double fraction = 0.0;      // of the whole pipeline stage, 0..1, never going back
-  double seconds = 0.0;       // spent in it so far
+  std::string step;            // the Progress stage running in it now ("atlas: packing")
+  double fraction = 0.0;       // of the whole pipeline stage, 0..1, never going back
+  double seconds = 0.0;        // spent in it so far
   double seconds_left = -1.0;  // estimate from its own pace; < 0 while unknown
 };
 
@@ -95,8 +95,8 @@ struct JobStatus {
   std::array<StageBar, kPipelineStages> bars{};
   int stage_changes = 0;
   bool cancelling = false;
-  std::string error;   // what failed, naming the file or device (empty unless kFailed)
-  std::string advice;  // what to do about it (kFailed and kCancelled)
+  std::string error;       // what failed, naming the file or device (empty unless kFailed)
+  std::string advice;      // what to do about it (kFailed and kCancelled)
   bool resumable = false;  // the session folder can be continued (Resume)
   std::optional<studio::RunResult> run;          // kRun / kResume succeeded
   std::optional<studio::ProcessResult> process;  // kReprocess succeeded

@@ -25,12 +25,12 @@ const char* ModelModeName(ModelMode mode);
 
 // Three corners per triangle (flat normals, per-face colours), float for the GPU.
 struct ModelMesh {
-  std::vector<float> positions;  // xyz per corner, metres
-  std::vector<float> normals;    // xyz per corner, the face's
-  std::vector<float> uvs;        // uv per corner, image convention (v down)
-  std::vector<float> chart_rgb;  // rgb per corner, the face's chart colour
+  std::vector<float> positions;    // xyz per corner, metres
+  std::vector<float> normals;      // xyz per corner, the face's
+  std::vector<float> uvs;          // uv per corner, image convention (v down)
+  std::vector<float> chart_rgb;    // rgb per corner, the face's chart colour
   std::vector<float> density_rgb;  // rgb per corner, the face's texel-density colour
-  cv::Mat texture_rgba;          // CV_8UC4, rows top first (v = 0 is row 0)
+  cv::Mat texture_rgba;            // CV_8UC4, rows top first (v = 0 is row 0)
   // Its mip levels 1, 2, ... down to 1 x 1 (area-averaged), made here rather than by the GPU
   // driver so that showing a model costs the window no frame time (Mesa's llvmpipe builds
   // mip-maps on the CPU, in the drawing thread).
@@ -54,8 +54,8 @@ ModelMesh LoadSessionModel(const std::filesystem::path& session);
 // pixels on the longer side, and the scores the texture stage recorded.
 struct HeldOutComparison {
   int view = -1;
-  std::string photo;   // the photo's file, relative to the session
-  cv::Mat photo_rgba, render_rgba;  // CV_8UC4, the same size
+  std::string photo;                 // the photo's file, relative to the session
+  cv::Mat photo_rgba, render_rgba;   // CV_8UC4, the same size
   double psnr_db = 0.0, ssim = 0.0;  // from model/report.json
 };
 // The views model/report.json scored (none when it holds none or is missing).

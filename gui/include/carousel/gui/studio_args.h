@@ -15,11 +15,11 @@ namespace carousel::gui {
 struct StudioArgs {
   // What the one button runs: the simulated rig (default) or a rig file's hardware.
   studio::RunOptions run;
-  std::filesystem::path rig;     // --rig RIG.json
-  std::vector<std::string> products;  // --product SKU (repeated: operator mode, one per press)
-  bool operator_mode = false;    // --operator: full screen, SKU entry, one big button
-  bool autorun = false;          // --autorun: press the button for each --product
-  bool quit_when_done = false;   // --quit-when-done: exit once the autorun's sessions end
+  std::filesystem::path rig;             // --rig RIG.json
+  std::vector<std::string> products;     // --product SKU (repeated: operator mode, one per press)
+  bool operator_mode = false;            // --operator: full screen, SKU entry, one big button
+  bool autorun = false;                  // --autorun: press the button for each --product
+  bool quit_when_done = false;           // --quit-when-done: exit once the autorun's sessions end
   std::filesystem::path screenshot_dir;  // --screenshot-dir: a PNG per stage change and at the end
   std::filesystem::path frame_log;       // --frame-log: one frame time per line, ms
   int width = 1280, height = 800;        // --window WxH
