@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <utility>
 
 #include "carousel/core/error.h"
@@ -303,11 +304,14 @@ void StudioController::StartRun(studio::RunOptions options) {
     };
   }
   const std::string product = options.product;
+  const bool calibration = options.calibration.has_value();
   Launch(JobKind::kRun, product, session,
          [options = std::move(options)](Progress& progress, std::optional<studio::RunResult>* run,
                                         std::optional<studio::ProcessResult>*) {
            *run = studio::RunSession(options, progress);
          });
+  std::lock_guard<std::mutex> lock(mutex_);
+  status_.calibration = calibration;
 }
 
 void StudioController::StartResume(const std::filesystem::path& session) {
@@ -335,6 +339,49 @@ void StudioController::StartReprocess(const std::filesystem::path& session,
                                               std::optional<studio::ProcessResult>* process) {
         *process = studio::ProcessSession(session, options, progress);
       });
+}
+
+CalibrationVerdict JudgeCalibration(const studio::CalibrateSessionResult& result, double max_rms_px,
+                                    double max_angle_deg, int min_views) {
+  CalibrationVerdict verdict;
+  const calib::RigCalibration& c = result.result.calibration;
+  char line[256];
+  for (const calib::RigCameraCalibration& camera : c.cameras) {
+    const CameraModel& m = camera.camera;
+    std::snprintf(line, sizeof(line), "%s: fx %.1f fy %.1f cx %.1f cy %.1f, %d photos, %.3f px RMS",
+                  camera.name.c_str(), m.fx, m.fy, m.cx, m.cy, camera.views, camera.rms_px);
+    verdict.lines.emplace_back(line);
+    if (!(camera.rms_px <= max_rms_px)) {
+      std::snprintf(line, sizeof(line), "%s reprojects the board at %.2f px RMS (> %.2f px)",
+                    camera.name.c_str(), camera.rms_px, max_rms_px);
+      verdict.reasons.emplace_back(line);
+    }
+  }
+  std::snprintf(line, sizeof(line),
+                "turntable: observed/reported angle %.4f, largest deviation %.3f deg",
+                c.angle_scale, c.angle_residual_max_deg);
+  verdict.lines.emplace_back(line);
+  if (!(c.angle_residual_max_deg <= max_angle_deg)) {
+    std::snprintf(line, sizeof(line),
+                  "the table turned up to %.2f deg away from where it reported (> %.2f deg)",
+                  c.angle_residual_max_deg, max_angle_deg);
+    verdict.reasons.emplace_back(line);
+  }
+  // A turntable shows each camera the board's face for about half a turn per placement: what
+  // counts is enough good views per camera, not the share of all photos.
+  for (const calib::RigCameraCalibration& camera : c.cameras) {
+    if (camera.views < min_views) {
+      std::snprintf(line, sizeof(line),
+                    "%s saw the board well in %d photos (< %d): place it so that the camera "
+                    "sees it whole for longer",
+                    camera.name.c_str(), camera.views, min_views);
+      verdict.reasons.emplace_back(line);
+    }
+  }
+  if (c.cameras.empty()) verdict.reasons.emplace_back("no camera was calibrated");
+  for (const std::string& w : result.result.warnings) verdict.lines.push_back("warning: " + w);
+  verdict.pass = verdict.reasons.empty();
+  return verdict;
 }
 
 bool ModelReady(const JobStatus& status) {

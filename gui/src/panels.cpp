@@ -10,6 +10,7 @@
 #include <imgui_stdlib.h>
 
 #include "carousel/core/error.h"
+#include "carousel/studio/calibrate_session.h"
 #include "carousel/studio/sim_capture.h"
 #include "studio_app.h"
 
@@ -240,6 +241,56 @@ void StudioApp::DrawRigPanel() {
   }
 }
 
+void StudioApp::DrawCalibrationPanel(const JobStatus& job) {
+  const bool busy = job.state == JobState::kRunning;
+  const bool mine = job.calibration;
+  ImGui::TextColored(mine && !busy ? kDim : ImVec4(1, 1, 1, 1),
+                     "1. Stand the board on the turntable, facing the cameras");
+  OptionWidgets("calibration", studio::CalibrationPlan::Fields(), args_.plan, calibration_edit_,
+                show_advanced_, busy);
+  if (busy) ImGui::BeginDisabled();
+  if (ImGui::Button("Start calibration", ImVec2(-1.0f, 0.0f))) StartCalibration();
+  if (busy) ImGui::EndDisabled();
+  ImGui::TextColored(mine && busy ? ImVec4(1, 1, 1, 1) : kDim,
+                     "2. The table turns with the board on it, once per placement");
+  if (mine && job.board_prompt) {
+    ImGui::TextColored(
+        kGreen, "Placement %d of %d: %s", job.board_prompt->index + 1, job.board_prompt->placements,
+        job.board_prompt->index == 0 ? "stand the board on the turntable"
+                                     : "lean the board differently without moving the cameras");
+    if (ImGui::Button("The board is in place", ImVec2(-1.0f, 0.0f)))
+      controller_.ConfirmBoardPlaced();
+  }
+  if (mine && busy) DrawStageBars(job, 0.0f);
+  ImGui::TextColored(mine && !busy ? ImVec4(1, 1, 1, 1) : kDim, "3. The result");
+  if (!mine || busy) return;
+  if (job.state != JobState::kSucceeded || !job.run || !job.run->calibration) {
+    DrawJobMessage(job);
+    return;
+  }
+  const studio::CalibrateSessionResult& result = *job.run->calibration;
+  const CalibrationVerdict verdict = JudgeCalibration(result);
+  ImGui::PushStyleColor(ImGuiCol_Button, verdict.pass ? kGreen : kRed);
+  ImGui::PushStyleColor(ImGuiCol_ButtonHovered, verdict.pass ? kGreen : kRed);
+  ImGui::PushStyleColor(ImGuiCol_ButtonActive, verdict.pass ? kGreen : kRed);
+  ImGui::Button(verdict.pass ? "PASS: the rig is calibrated" : "FAIL: calibrate again",
+                ImVec2(-1.0f, 48.0f));
+  ImGui::PopStyleColor(3);
+  ImGui::PushTextWrapPos(0.0f);
+  for (const std::string& reason : verdict.reasons) ImGui::TextColored(kRed, "%s", reason.c_str());
+  for (const std::string& line : verdict.lines) {
+    ImGui::Bullet();
+    ImGui::TextWrapped("%s", line.c_str());
+  }
+  ImGui::TextColored(kDim, "%s", result.file.string().c_str());
+  ImGui::PopTextWrapPos();
+  if (verdict.pass && ImGui::Button("Use it for the next sessions", ImVec2(-1.0f, 0.0f))) {
+    args_.run.calibration_file = result.file;
+    calibration_notice_ = "sessions now take their cameras from " + result.file.string();
+  }
+  if (!calibration_notice_.empty()) ImGui::TextColored(kGreen, "%s", calibration_notice_.c_str());
+}
+
 void StudioApp::DrawSessionsPanel() {
   const bool busy = controller_.Busy();
   if (ImGui::Button("Refresh")) sessions_ = ListSessions(args_.run.out);
@@ -269,7 +320,8 @@ void StudioApp::DrawSessionsPanel() {
     ImGui::Text("%d", s.photos);
     ImGui::TableNextColumn();
     if (busy) ImGui::BeginDisabled();
-    if (s.resumable && s.state != "complete" && ImGui::SmallButton("Resume")) {
+    if (s.resumable && s.state != "complete" && s.state != "calibrated" &&
+        ImGui::SmallButton("Resume")) {
       try {
         rig_.Disconnect();
         controller_.StartResume(s.folder);
@@ -277,7 +329,7 @@ void StudioApp::DrawSessionsPanel() {
         start_error_ = e.what();
       }
     }
-    if (s.state != "unreadable" && s.state != "capturing") {
+    if (s.state != "unreadable" && s.state != "capturing" && !s.calibration) {
       ImGui::SameLine();
       if (ImGui::SmallButton("Reprocess")) {
         try {
@@ -317,6 +369,8 @@ void StudioApp::DrawStudio() {
     open_rig_panel_ = false;
   }
   if (ImGui::CollapsingHeader("Rig")) DrawRigPanel();
+  if (args_.calibration || job.calibration) ImGui::SetNextItemOpen(true, ImGuiCond_Once);
+  if (ImGui::CollapsingHeader("Calibration")) DrawCalibrationPanel(job);
   if (ImGui::CollapsingHeader("Sessions", ImGuiTreeNodeFlags_DefaultOpen)) DrawSessionsPanel();
   ImGui::End();
 

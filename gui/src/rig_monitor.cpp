@@ -41,7 +41,8 @@ void RigMonitor::Disconnect() {
   wake_.notify_all();
   if (thread_.joinable()) thread_.join();
   std::lock_guard<std::mutex> lock(mutex_);
-  if (status_.state != RigMonitorStatus::State::kFailed) status_.state = RigMonitorStatus::State::kOff;
+  if (status_.state != RigMonitorStatus::State::kFailed)
+    status_.state = RigMonitorStatus::State::kOff;
 }
 
 RigMonitorStatus RigMonitor::Status() const {

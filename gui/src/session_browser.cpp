@@ -81,6 +81,10 @@ std::vector<SessionSummary> ListSessions(const std::filesystem::path& out) {
       s.source = session.source;
       s.photos = static_cast<int>(session.views.size());
       s.state = StateOf(session);
+      s.calibration = session.stages.count("calibrate") != 0 ||
+                      std::filesystem::is_directory(folder / "calibration", ec);
+      if (s.calibration && s.state == "captured")
+        s.state = session.stages.count("calibrate") != 0 ? "calibrated" : "captured";
     } catch (const IoError& e) {
       if (IsFile(folder / studio::kManifestName)) {
         s.state = "unreadable";

@@ -17,6 +17,7 @@
 #include "carousel/core/error.h"
 #include "carousel/core/json.h"
 #include "carousel/core/logging.h"
+#include "carousel/studio/calibrate_session.h"
 #include "carousel/studio/session.h"
 
 namespace carousel::gui {
@@ -168,7 +169,8 @@ int StudioApp::Run() {
     if (autorun_waiting_model_ && model_frames_ >= 3) autorun_waiting_model_ = false;
     // The autorun is over once every product was pressed, the last session ended and its
     // model (or result) has been on screen for half a second.
-    if (args_.autorun && !autorun_done_ && autorun_next_ >= args_.products.size() &&
+    if (args_.autorun && !autorun_done_ &&
+        autorun_next_ >= (args_.calibration ? 1 : args_.products.size()) &&
         last_state_ != JobState::kRunning && !autorun_waiting_model_ && idle_frames_ >= 30) {
       autorun_done_ = true;
       Screenshot("final");
@@ -283,11 +285,14 @@ void StudioApp::Poll() {
     // The job ended: show what it made, and what the sessions are now.
     sessions_ = ListSessions(args_.run.out);
     OpenSession(job.session);
-    if (job.state == JobState::kSucceeded && !args_.operator_mode) {
+    if (job.state == JobState::kSucceeded && !args_.operator_mode && !job.calibration) {
       select_tab_ = Tab::kModel;
       autorun_waiting_model_ = args_.autorun;
     }
     if (job.state != JobState::kSucceeded) failures_ = true;
+    if (job.calibration && job.run && job.run->calibration &&
+        !JudgeCalibration(*job.run->calibration).pass)
+      failures_ = true;
     if (args_.operator_mode) {
       shots_pending_.push_back(job.product + "-result");  // once the verdict is drawn
       sku_.clear();                                       // ready for the next product's barcode
@@ -385,8 +390,31 @@ void StudioApp::PressButton(const std::string& sku) {
   }
 }
 
+void StudioApp::StartCalibration() {
+  start_error_.clear();
+  idle_frames_ = 0;
+  rig_.Disconnect();
+  try {
+    studio::RunOptions options = args_.run;
+    // A new calibration session each time: rig-calibration-20261206-091500.
+    std::string stamp = studio::NowUtc();
+    stamp.erase(std::remove_if(stamp.begin(), stamp.end(),
+                               [](char c) { return c == '-' || c == ':' || c == 'Z'; }),
+                stamp.end());
+    std::replace(stamp.begin(), stamp.end(), 'T', '-');
+    options.product = "rig-calibration-" + stamp;
+    options.calibration = args_.plan;
+    options.calibration_file.clear();
+    options.texture.grouping.exclude_views.clear();
+    controller_.StartRun(options);
+  } catch (const Error& e) {
+    start_error_ = e.what();
+  }
+}
+
 void StudioApp::Automate() {
-  if (!args_.autorun || autorun_next_ >= args_.products.size()) return;
+  const std::size_t presses = args_.calibration ? 1 : args_.products.size();
+  if (!args_.autorun || autorun_next_ >= presses) return;
   if (last_state_ == JobState::kRunning || autorun_waiting_model_) return;
   // The first press once the window is up; the next once the last result has shown a while.
   if (frame_ < 5 || (autorun_next_ > 0 && idle_frames_ < 30)) return;
@@ -405,6 +433,15 @@ void StudioApp::Automate() {
     shots_pending_.push_back("live-view");
     live_check_ = LiveCheck::kShown;
     return;  // the screenshot is taken at the end of this frame; the press follows
+  }
+  if (args_.calibration) {
+    ++autorun_next_;
+    StartCalibration();
+    if (!start_error_.empty()) {
+      failures_ = true;
+      if (args_.quit_when_done) quit_ = true;
+    }
+    return;
   }
   const std::string sku = args_.products[autorun_next_++];
   sku_ = sku;

@@ -49,6 +49,7 @@ class StudioApp {
   void Poll();  // job end, loaded model, thumbnails
   void Automate();
   void PressButton(const std::string& sku);
+  void StartCalibration();
   void OpenSession(const std::filesystem::path& session);
   void StartModelLoad(const std::filesystem::path& session);
   void StartHeldOutLoad(int view);
@@ -60,6 +61,7 @@ class StudioApp {
   void DrawSessionPanel(const JobStatus& job, float height);
   void DrawPlanPanel();
   void DrawRigPanel();
+  void DrawCalibrationPanel(const JobStatus& job);
   void DrawSessionsPanel();
   void DrawStageBars(const JobStatus& job, float bar_height);
   void DrawJobMessage(const JobStatus& job);
@@ -115,7 +117,8 @@ class StudioApp {
   std::string sku_;
   std::string out_text_;     // the sessions folder as typed
   std::string start_error_;  // a press refused (no SKU, busy, bad setting)
-  OptionEditState plan_edit_;
+  OptionEditState plan_edit_, calibration_edit_;
+  std::string calibration_notice_;  // "sessions now use ..."
   bool show_advanced_ = false;
   std::optional<Tab> select_tab_;
   bool focus_sku_ = true;

@@ -21,6 +21,7 @@ struct Tables {
       studio::TextureSessionOptions::Fields().Only({"exclude-views"});
   const OptionTable<studio::PublishSessionOptions>& publish =
       studio::PublishSessionOptions::Fields();
+  const OptionTable<studio::CalibrationPlan>& plan = studio::CalibrationPlan::Fields();
 };
 
 const Tables& TheTables() {
@@ -110,6 +111,8 @@ StudioArgs ParseStudioArgs(const std::vector<std::string>& args) {
       out.run.out = value();
     } else if (name == "operator") {
       out.operator_mode = true;
+    } else if (name == "calibration") {
+      out.calibration = true;
     } else if (name == "autorun") {
       out.autorun = true;
     } else if (name == "quit-when-done") {
@@ -135,20 +138,22 @@ StudioArgs ParseStudioArgs(const std::vector<std::string>& args) {
                         "unknown flag '" << arg << "' (carousel-studio --help lists them)");
       if (needs_value) {
         text = value();
-        SetFrom(tables.sim, out.run.sim, name, &text, &needs_value) ||
-            SetFrom(tables.texture, out.run.texture, name, &text, &needs_value) ||
-            SetFrom(tables.publish, out.run.publish, name, &text, &needs_value);
+        (void)(SetFrom(tables.sim, out.run.sim, name, &text, &needs_value) ||
+               SetFrom(tables.texture, out.run.texture, name, &text, &needs_value) ||
+               SetFrom(tables.publish, out.run.publish, name, &text, &needs_value) ||
+               SetFrom(tables.plan, out.plan, name, &text, &needs_value));
       }
     }
   }
   CAROUSEL_THROW_IF(sim && !out.rig.empty(), InvalidArgument,
                     "--sim and --rig exclude each other: the simulated rig or the rig file's");
-  CAROUSEL_THROW_IF(out.autorun && out.products.empty(), InvalidArgument,
+  CAROUSEL_THROW_IF(out.autorun && out.products.empty() && !out.calibration, InvalidArgument,
                     "--autorun needs --product SKU (the button presses it)");
   CAROUSEL_THROW_IF(!out.operator_mode && out.products.size() > 1, InvalidArgument,
                     "several --product values are for --operator (one press each)");
   if (!out.rig.empty()) out.run.hardware = studio::ReadRigConfig(out.rig);
   if (!out.products.empty()) out.run.product = out.products.front();
+  out.plan.Validate();
   if (!out.run.product.empty()) {
     out.run.Validate();
   } else {
@@ -169,7 +174,9 @@ std::string StudioUsage() {
          "  --product SKU  the product's SKU (repeat it with --operator --autorun)\n"
          "  --out DIR  folder of the sessions [sessions]\n"
          "  --operator  operator mode: full screen, SKU entry, one big button\n"
-         "  --autorun  press the button for each --product\n"
+         "  --autorun  press the button for each --product (with --calibration: run the "
+         "calibration wizard)\n"
+         "  --calibration  the calibration wizard's session (the board on the table)\n"
          "  --quit-when-done  exit when the autorun's sessions have ended\n"
          "  --screenshot-dir DIR  a PNG of the window at each stage change and at the end\n"
          "  --frame-log FILE  one frame time per line (ms)\n"
@@ -183,6 +190,8 @@ std::string StudioUsage() {
   AppendUsage(out, tables.sim, defaults.run.sim);
   AppendUsage(out, tables.texture, defaults.run.texture);
   AppendUsage(out, tables.publish, defaults.run.publish);
+  out << "\nCalibration (with --calibration):\n";
+  AppendUsage(out, tables.plan, defaults.plan);
   return out.str();
 }
 

@@ -252,6 +252,40 @@ TEST(StudioControllerTest, AFailureNamesWhatFailedAndWhatToDo) {
   }
 }
 
+TEST(CalibrationVerdictTest, PassesOnlyAGoodCalibrationAndSaysWhatFailed) {
+  studio::CalibrateSessionResult good;
+  calib::RigCameraCalibration camera;
+  camera.name = "cam0";
+  camera.views = 10;
+  camera.rms_px = 0.3;
+  good.result.calibration.cameras = {camera};
+  good.result.calibration.angle_residual_max_deg = 0.1;
+  const CalibrationVerdict pass = JudgeCalibration(good);
+  EXPECT_TRUE(pass.pass);
+  EXPECT_TRUE(pass.reasons.empty());
+  EXPECT_EQ(pass.lines.size(), 2u);  // the camera and the table
+
+  studio::CalibrateSessionResult blurry = good;
+  blurry.result.calibration.cameras[0].rms_px = 1.7;
+  const CalibrationVerdict v1 = JudgeCalibration(blurry);
+  EXPECT_FALSE(v1.pass);
+  ASSERT_EQ(v1.reasons.size(), 1u);
+  EXPECT_NE(v1.reasons[0].find("1.70 px"), std::string::npos) << v1.reasons[0];
+
+  studio::CalibrateSessionResult slipping = good;
+  slipping.result.calibration.angle_residual_max_deg = 0.8;
+  EXPECT_FALSE(JudgeCalibration(slipping).pass);
+
+  studio::CalibrateSessionResult few = good;
+  few.result.calibration.cameras[0].views = 3;
+  const CalibrationVerdict v3 = JudgeCalibration(few);
+  EXPECT_FALSE(v3.pass);
+  EXPECT_NE(v3.reasons[0].find("3 photos"), std::string::npos) << v3.reasons[0];
+
+  studio::CalibrateSessionResult none;
+  EXPECT_FALSE(JudgeCalibration(none).pass);
+}
+
 TEST(SessionBrowserTest, DamagedAndHalfStartedSessionsAreListedWithTheirState) {
   testing::TempDir dir;
   std::filesystem::create_directories(dir / "broken");

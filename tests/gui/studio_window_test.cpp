@@ -201,6 +201,26 @@ TEST(StudioWindowTest, OperatorModeBuildsTwoProductsInARowOnePressEach) {
   }
 }
 
+TEST(StudioWindowTest, TheCalibrationWizardEndsWithAClearVerdict) {
+  testing::TempDir dir;
+  const testing::ShellResult window =
+      RunWindow("--sim --calibration --size 480x320 --views 12 --out " + (dir / "s").string() +
+                " --autorun --quit-when-done --screenshot-dir " + (dir / "shots").string());
+  ASSERT_EQ(window.code, 0) << window.out;  // 0: the session ran and its verdict was a pass
+  std::vector<std::filesystem::path> sessions;
+  for (const auto& e : std::filesystem::directory_iterator(dir / "s")) sessions.push_back(e.path());
+  ASSERT_EQ(sessions.size(), 1u);
+  EXPECT_EQ(sessions[0].filename().string().rfind("rig-calibration-", 0), 0u);
+  EXPECT_TRUE(
+      std::filesystem::is_regular_file(sessions[0] / "calibration" / "rig_calibration.json"));
+  // The wizard's third step shows the verdict in green in the left column.
+  const cv::Mat last = cv::imread(Screenshots(dir / "shots").back().string());
+  cv::Mat green;
+  cv::inRange(last(cv::Rect(0, 0, 440, 800)), cv::Scalar(80, 180, 55), cv::Scalar(100, 200, 75),
+              green);
+  EXPECT_GT(cv::countNonZero(green), 420 * 40);
+}
+
 // A studio in a box (what `carousel sim rig` runs): the firmware in simavr behind a PTY and two
 // PTP/IP camera emulators, 6 stops at 360x240; the window drives it through real termios and
 // real libgphoto2 from its rig file.

@@ -20,6 +20,7 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "carousel/core/progress.h"
 #include "carousel/studio/pipeline.h"
@@ -91,6 +92,7 @@ struct JobStatus {
   JobState state = JobState::kIdle;
   int id = 0;                     // counts jobs started (0: none yet)
   std::string product;            // the SKU
+  bool calibration = false;       // a calibration session (the wizard's)
   std::filesystem::path session;  // the session folder (known from the start)
   std::array<StageBar, kPipelineStages> bars{};
   int stage_changes = 0;
@@ -150,5 +152,17 @@ class StudioController {
 
 // Whether a job's outcome is a finished model ready to show (the operator's green light).
 bool ModelReady(const JobStatus& status);
+
+// The calibration wizard's last step: pass or fail, and why. A calibration passes when every
+// camera reprojects the board within `max_rms_px` from at least `min_views` photos, and the
+// turntable turned as it reported (largest deviation within `max_angle_deg`).
+struct CalibrationVerdict {
+  bool pass = false;
+  std::vector<std::string> reasons;  // what failed (empty when it passed)
+  std::vector<std::string> lines;    // the figures, one line per camera and one for the table
+};
+CalibrationVerdict JudgeCalibration(const studio::CalibrateSessionResult& result,
+                                    double max_rms_px = 1.0, double max_angle_deg = 0.25,
+                                    int min_views = 6);
 
 }  // namespace carousel::gui

@@ -29,7 +29,7 @@ struct RigCameraView {
 struct RigMonitorStatus {
   enum class State { kOff, kConnecting, kOn, kFailed };
   State state = State::kOff;
-  std::string error;  // kFailed, or the last command's failure (names the device)
+  std::string error;      // kFailed, or the last command's failure (names the device)
   std::string turntable;  // model, firmware and port
   double angle_deg = 0.0;
   bool moving = false, homed = false;

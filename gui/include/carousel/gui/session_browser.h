@@ -23,9 +23,10 @@ struct SessionSummary {
   // "complete" (model published or textured), "textured", "reconstructed", "captured",
   // "capturing" (photos being taken or the run stopped during capture), "unreadable"
   std::string state;
-  std::string problem;     // why it is unreadable (names the file)
-  bool has_model = false;  // model/model.glb exists
-  bool resumable = false;  // run.json exists: `carousel run --resume` continues it
+  std::string problem;       // why it is unreadable (names the file)
+  bool has_model = false;    // model/model.glb exists
+  bool resumable = false;    // run.json exists: `carousel run --resume` continues it
+  bool calibration = false;  // a calibration session (its photos are of the board)
 };
 
 // The session folders directly under `out` (hidden staging folders skipped), newest first.

@@ -15,9 +15,13 @@ namespace carousel::gui {
 struct StudioArgs {
   // What the one button runs: the simulated rig (default) or a rig file's hardware.
   studio::RunOptions run;
-  std::filesystem::path rig;             // --rig RIG.json
-  std::vector<std::string> products;     // --product SKU (repeated: operator mode, one per press)
-  bool operator_mode = false;            // --operator: full screen, SKU entry, one big button
+  std::filesystem::path rig;          // --rig RIG.json
+  std::vector<std::string> products;  // --product SKU (repeated: operator mode, one per press)
+  bool operator_mode = false;         // --operator: full screen, SKU entry, one big button
+  // --calibration: the autorun runs the calibration wizard (the board on the table) instead
+  // of a product session; the plan's fields (--board, --placements, ...) as `carousel run`.
+  bool calibration = false;
+  studio::CalibrationPlan plan;
   bool autorun = false;                  // --autorun: press the button for each --product
   bool quit_when_done = false;           // --quit-when-done: exit once the autorun's sessions end
   std::filesystem::path screenshot_dir;  // --screenshot-dir: a PNG per stage change and at the end
