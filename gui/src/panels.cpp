@@ -181,6 +181,14 @@ void StudioApp::DrawRigPanel() {
                        sim.scene.c_str(), sim.rig.elevations_deg.size(), sim.rig.width,
                        sim.rig.height, sim.stops);
   }
+  if (!usb_) usb_ = std::make_unique<UsbEvents>();
+  if (ImGui::TreeNode("USB devices")) {
+    ImGui::TextColored(kDim, "watching: %s", usb_->Mode().c_str());
+    const std::vector<std::string> lines = usb_->Lines();
+    if (lines.empty()) ImGui::TextColored(kDim, "no camera or USB-serial adapter");
+    for (const std::string& line : lines) ImGui::TextWrapped("%s", line.c_str());
+    ImGui::TreePop();
+  }
   const RigMonitorStatus status = rig_.Status();
   using State = RigMonitorStatus::State;
   const bool on = status.state == State::kOn || status.state == State::kConnecting;

@@ -175,4 +175,43 @@ void RigMonitor::Loop(studio::RigRequest request) {
   // The devices close here (rig's destructors), on this thread.
 }
 
+namespace {
+
+std::string Describe(const rig::UsbDevice& d) {
+  return d.vendor + " " + d.description + " (" + d.ids() + ") on " +
+         (d.kind == rig::UsbDeviceKind::kCamera ? d.gphoto_port() : "port " + d.port_path);
+}
+
+}  // namespace
+
+UsbEvents::UsbEvents() {
+  monitor_ = std::make_unique<rig::UsbMonitor>([this](const rig::UsbDevice& d, bool arrived) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    lines_.push_back(std::string(arrived ? "arrived: " : "left: ") + Describe(d));
+    if (lines_.size() > 50) lines_.erase(lines_.begin());
+  });
+  std::lock_guard<std::mutex> lock(mutex_);
+  for (const rig::UsbDevice& d : monitor_->initial())
+    lines_.insert(lines_.begin(), "present: " + Describe(d));
+}
+
+UsbEvents::~UsbEvents() { monitor_.reset(); }
+
+std::vector<std::string> UsbEvents::Lines() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return lines_;
+}
+
+std::string UsbEvents::Mode() const {
+  switch (monitor_->mode()) {
+    case rig::UsbMonitorMode::kHotplug:
+      return "hotplug";
+    case rig::UsbMonitorMode::kPolling:
+      return "polling (" + monitor_->reason() + ")";
+    case rig::UsbMonitorMode::kUnavailable:
+      return "unavailable (" + monitor_->reason() + ")";
+  }
+  return "?";
+}
+
 }  // namespace carousel::gui

@@ -107,6 +107,7 @@ class StudioApp {
   bool show_masks_ = true;
   std::vector<SessionSummary> sessions_;
   RigMonitor rig_;
+  std::unique_ptr<UsbEvents> usb_;  // made when the Rig panel is first opened
   GLuint live_view_ = 0;
   int live_frame_seen_ = 0;
   cv::Size live_size_;
@@ -133,6 +134,8 @@ class StudioApp {
   // The autorun: products pressed so far, frames since the last session ended.
   std::size_t autorun_next_ = 0;
   int frame_ = 0, idle_frames_ = 0;
+  std::chrono::steady_clock::time_point idle_since_{};
+  bool IdleFor(double seconds) const;  // no job for that long (and a few frames drawn)
   bool autorun_waiting_model_ = false;
   // Hardware mode: the autorun first shows the live view, then presses.
   enum class LiveCheck { kNone, kWaiting, kShown } live_check_ = LiveCheck::kNone;
@@ -140,7 +143,6 @@ class StudioApp {
   bool autorun_done_ = false;
   bool quit_ = false;
   std::ofstream frame_log_;
-  std::chrono::steady_clock::time_point last_frame_{};
 };
 
 }  // namespace carousel::gui

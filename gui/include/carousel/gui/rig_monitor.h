@@ -10,6 +10,7 @@
 #include <deque>
 #include <functional>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -17,6 +18,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "carousel/rig/usb_devices.h"
 #include "carousel/studio/rig_factory.h"
 
 namespace carousel::gui {
@@ -74,6 +76,25 @@ class RigMonitor {
   bool stop_ = false;
   cv::Mat frame_;
   std::thread thread_;
+};
+
+// Cameras and USB-serial adapters arriving and leaving (rig::UsbMonitor: libusb hotplug, or
+// polling where hotplug is missing), as lines for the Rig panel, newest last.
+class UsbEvents {
+ public:
+  UsbEvents();
+  ~UsbEvents();
+  UsbEvents(const UsbEvents&) = delete;
+  UsbEvents& operator=(const UsbEvents&) = delete;
+  // "present: Canon PTP camera on usb:001,005", "arrived: ...", "left: ...".
+  std::vector<std::string> Lines() const;
+  // How it watches: "hotplug", "polling (reason)", "unavailable (reason)".
+  std::string Mode() const;
+
+ private:
+  mutable std::mutex mutex_;
+  std::vector<std::string> lines_;
+  std::unique_ptr<rig::UsbMonitor> monitor_;
 };
 
 }  // namespace carousel::gui
