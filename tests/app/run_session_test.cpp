@@ -534,5 +534,34 @@ TEST(RunSessionTest, FullDiskAndUnwritableFolderAreClearErrorsAndLoseNothing) {
   EXPECT_THAT(testing::ReadBytes(log), ::testing::HasSubstr("blocker"));
 }
 
+// `carousel sim rig`: a studio in a box until interrupted, its rig file naming a turntable
+// that answers through the firmware and a camera that answers through libgphoto2.
+TEST(SimRigCommandTest, ServesItsRigFileUntilInterrupted) {
+  TempDir dir;
+  ::setenv("HOME", dir.path().c_str(), 1);  // libgphoto2's ~/.gphoto/settings
+  const std::filesystem::path rig_file = dir / "rig.json";
+  const pid_t pid =
+      Spawn({"sim", "rig", "--cameras", "1", "--size", "240x160", "--views", "4", "--data",
+             testing::SharedDataDir().string(), "--out", rig_file.string()});
+  for (int i = 0; i < 600 && !std::filesystem::exists(rig_file); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  ASSERT_TRUE(std::filesystem::exists(rig_file));
+  const RigConfig rig = ReadRigConfig(rig_file);
+  ASSERT_EQ(rig.cameras.size(), 1u);
+  EXPECT_EQ(rig.capture.stops, 4);
+  EXPECT_EQ(rig.cameras[0].serial, "EMU0");
+  EXPECT_EQ(rig.cameras[0].calibration.width, 240);
+  const testing::ShellResult table = testing::RunShell(
+      testing::CarouselExecutable() + " turntable --port " + rig.turntable.port + " identify 2>&1");
+  EXPECT_EQ(table.code, 0) << table.out;
+  EXPECT_THAT(table.out, ::testing::HasSubstr("firmware"));
+  const testing::ShellResult camera = testing::RunShell(
+      testing::CarouselExecutable() + " camera summary --port " + rig.cameras[0].port + " 2>&1");
+  EXPECT_EQ(camera.code, 0) << camera.out;
+  EXPECT_THAT(camera.out, ::testing::HasSubstr("EMU0"));
+  ::kill(pid, SIGINT);
+  EXPECT_EQ(Wait(pid), 0);
+}
+
 }  // namespace
 }  // namespace carousel::studio
