@@ -27,15 +27,16 @@ const OptionTable<SimulatedStudioOptions>& SimulatedStudioOptions::Fields() {
                         .max = 8,
                         .special = 0,
                         .special_meaning = "one per --elevations"});
-    t.Add(&O::time_scale,
-          {.name = "time-scale", .help = "simulated seconds per second while the firmware "
-                                         "waits",
-           .min = 1,
-           .max = 1000});
+    t.Add(&O::time_scale, {.name = "time-scale",
+                           .help = "simulated seconds per second while the firmware "
+                                   "waits",
+                           .min = 1,
+                           .max = 1000});
     t.Add(&O::settle_ms,
           {.name = "settle-ms", .help = "the capture plan's settle time", .unit = "ms", .min = 0});
-    t.Add(&O::firmware, {.name = "firmware", .help = "turntable firmware ELF (default: this "
-                                                     "build's)"});
+    t.Add(&O::firmware, {.name = "firmware",
+                         .help = "turntable firmware ELF (default: this "
+                                 "build's)"});
     return t;
   }();
   return table;
@@ -132,7 +133,8 @@ RigConfig SimulatedStudio::Config() const {
   config.turntable.port = s.controller->port();
   for (std::size_t c = 0; c < s.models.size(); ++c) {
     RigCameraConfig camera;
-    camera.port = "ptpip:127.0.0.1:" + std::to_string(s.ports[c]) + ":" + std::to_string(s.ports[c]);
+    camera.port =
+        "ptpip:127.0.0.1:" + std::to_string(s.ports[c]) + ":" + std::to_string(s.ports[c]);
     camera.serial = "EMU" + std::to_string(c);
     camera.calibration = s.models[c];
     config.cameras.push_back(camera);
