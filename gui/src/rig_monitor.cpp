@@ -114,7 +114,7 @@ void RigMonitor::Loop(studio::RigRequest request) {
     status_.turntable = info.model + " " + info.firmware + " on " + info.port;
     status_.cameras = std::move(cameras);
     status_.state = RigMonitorStatus::State::kOn;
-  } catch (const Error& e) {
+  } catch (const std::exception& e) {
     std::lock_guard<std::mutex> lock(mutex_);
     status_.state = RigMonitorStatus::State::kFailed;
     status_.error = e.what();
@@ -164,7 +164,7 @@ void RigMonitor::Loop(studio::RigRequest request) {
           fps_start = Clock::now();
         }
       }
-    } catch (const Error& e) {
+    } catch (const std::exception& e) {  // the device named in the message stays shown
       std::lock_guard<std::mutex> lock(mutex_);
       status_.error = e.what();
     }

@@ -10,6 +10,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "carousel/core/error.h"
+#include "carousel/core/logging.h"
 #include "carousel/studio/checksum.h"
 #include "carousel/studio/session.h"
 
@@ -145,7 +146,11 @@ void PhotoWatcher::Loop() {
     const std::filesystem::path session = session_;
     if (!session.empty()) {
       lock.unlock();
-      Scan(session);
+      try {
+        Scan(session);
+      } catch (const std::exception& e) {  // a file that vanished mid-read: the next scan
+        CAROUSEL_LOG_WARN("photos of " << session.string() << ": " << e.what());
+      }
       lock.lock();
     }
     wake_.wait_for(lock, std::chrono::milliseconds(period_ms_));

@@ -274,7 +274,7 @@ StudioApp::LoadedSession StudioApp::LoadSession(const std::filesystem::path& fol
     out.held_out_views = HeldOutViews(folder);
     if (std::filesystem::is_regular_file(folder / "model" / "model.glb", ec))
       out.mesh = LoadSessionModel(folder);
-  } catch (const Error& e) {
+  } catch (const std::exception& e) {  // shown in the window: a loader never ends it
     out.error = e.what();
   }
   return out;
@@ -389,7 +389,7 @@ void StudioApp::Poll() {
       held_out_photo_ = UploadTexture(comparison.photo_rgba, false);
       held_out_render_ = UploadTexture(comparison.render_rgba, false);
       held_out_ = std::move(comparison);
-    } catch (const Error& e) {
+    } catch (const std::exception& e) {
       held_out_error_ = e.what();
     }
   }
