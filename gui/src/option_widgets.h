@@ -37,12 +37,13 @@ bool OptionWidgets(const char* id, const OptionTable<Owner>& table, Owner& objec
     if (is_bool) {
       bool* value = std::get<bool*>(field.ref(object));
       changed |= ImGui::Checkbox(info.name.c_str(), value);
-    } else if (field.is_choice() && !info.choices.empty()) {
-      const std::string current = field.text_get(object);
+    } else if (!info.choices.empty()) {
+      // An enum (is_choice) or a word field with its set of values.
+      const std::string current = GetOptionText(field, object);
       if (ImGui::BeginCombo(info.name.c_str(), current.c_str())) {
         for (const std::string& choice : info.choices) {
           if (ImGui::Selectable(choice.c_str(), choice == current) && choice != current) {
-            field.text_set(object, choice);
+            SetOptionText(field, object, choice);
             changed = true;
           }
         }

@@ -145,10 +145,22 @@ void StudioApp::DrawPlanPanel() {
   const bool busy = controller_.Busy();
   ImGui::Checkbox("advanced settings", &show_advanced_);
   if (args_.run.hardware) {
-    ImGui::TextWrapped("Capture plan of %s: %d stops, %d ms settle, shutter by %s",
-                       args_.rig.string().c_str(), args_.run.hardware->capture.stops,
-                       args_.run.hardware->capture.settle_ms,
-                       args_.run.hardware->capture.shutter.c_str());
+    // The rig file's plan, for the sessions this window starts (the file is not rewritten).
+    ImGui::TextColored(kDim, "the plan of %s", args_.rig.string().c_str());
+    OptionWidgets("capture", studio::CapturePlan::Fields(), args_.run.hardware->capture, plan_edit_,
+                  show_advanced_, busy);
+    std::string& backdrop = args_.run.hardware->backdrop;
+    if (busy) ImGui::BeginDisabled();
+    if (ImGui::BeginCombo("backdrop", backdrop.c_str())) {
+      for (const char* method : {"key", "difference"})
+        if (ImGui::Selectable(method, backdrop == method)) backdrop = method;
+      ImGui::EndCombo();
+    }
+    if (ImGui::IsItemHovered())
+      ImGui::SetTooltip(
+          "silhouettes by keying against the backdrop, or by differencing against "
+          "photos of the empty turntable (the rig file's backgrounds)");
+    if (busy) ImGui::EndDisabled();
   } else {
     static const OptionTable<studio::SimCaptureOptions> sim =
         studio::SimCaptureOptions::Fields().Only(studio::RunSimFieldNames());

@@ -18,6 +18,58 @@ using nlohmann::json;
 
 }  // namespace
 
+const OptionTable<CapturePlan>& CapturePlan::Fields() {
+  using P = CapturePlan;
+  static const OptionTable<P> table = [] {
+    OptionTable<P> t;
+    t.Add(&P::stops, {.name = "stops", .help = "turntable stops per turn", .min = 1, .max = 720});
+    t.Add(&P::settle_ms, {.name = "settle-ms",
+                          .help = "wait after a move before firing (vibration)",
+                          .unit = "ms",
+                          .min = 0,
+                          .max = 60000});
+    t.Add(&P::shutter, {.name = "shutter",
+                        .help = "who releases the shutters: libgphoto2 (camera) or the "
+                                "controller's shutter outputs, all at once (controller)",
+                        .choices = {"camera", "controller"}});
+    t.Add(&P::shutter_pulse_ms, {.name = "shutter-pulse-ms",
+                                 .help = "controller shutter: how long the release is held",
+                                 .unit = "ms",
+                                 .min = 1,
+                                 .max = 10000,
+                                 .advanced = true});
+    t.Add(&P::mask_shots, {.name = "mask-shots",
+                           .help = "a backlit mask shot beside every photo (the silhouettes "
+                                   "come from it)",
+                           .choices = {"none", "backlit"}});
+    t.Add(&P::backlight_settle_ms, {.name = "backlight-settle-ms",
+                                    .help = "wait after switching the backlight",
+                                    .unit = "ms",
+                                    .min = 0,
+                                    .max = 10000,
+                                    .advanced = true});
+    t.Add(&P::delete_from_camera, {.name = "delete-from-camera",
+                                   .help = "delete each photo from the card once it is safely "
+                                           "on disk",
+                                   .advanced = true,
+                                   .negative_name = "keep-on-camera"});
+    t.Add(&P::move_timeout_s, {.name = "move-timeout",
+                               .help = "longest a turntable move may take",
+                               .unit = "s",
+                               .min = 0,
+                               .min_exclusive = true,
+                               .advanced = true});
+    t.Add(&P::camera_timeout_s, {.name = "camera-timeout",
+                                 .help = "longest a camera operation may take",
+                                 .unit = "s",
+                                 .min = 0,
+                                 .min_exclusive = true,
+                                 .advanced = true});
+    return t;
+  }();
+  return table;
+}
+
 void CapturePlan::Validate() const {
   CAROUSEL_THROW_IF(stops < 1 || stops > 720, InvalidArgument,
                     "capture.stops must be 1..720, not " << stops);

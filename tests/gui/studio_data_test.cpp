@@ -7,6 +7,7 @@
 #include "carousel/core/error.h"
 #include "carousel/gui/model_view.h"
 #include "carousel/gui/studio_args.h"
+#include "carousel/studio/rig_config.h"
 #include "carousel/testing/testing.h"
 
 namespace carousel::gui {
@@ -125,6 +126,28 @@ TEST(OptionTextTest, FieldsReadBackWhatTheyWrite) {
   EXPECT_THROW(SetOptionText(table.Find("scale"), s, "nan"), InvalidArgument);
   EXPECT_THROW(SetOptionText(table.Find("on"), s, "maybe"), InvalidArgument);
   EXPECT_THROW(SetOptionText(table.Find("views"), s, "1,,2"), InvalidArgument);
+}
+
+TEST(CapturePlanFieldsTest, TheHardwarePlanIsEditedThroughItsDescription) {
+  studio::CapturePlan plan;
+  const OptionTable<studio::CapturePlan>& table = studio::CapturePlan::Fields();
+  SetOptionText(table.Find("stops"), plan, "24");
+  SetOptionText(table.Find("settle-ms"), plan, "150");
+  SetOptionText(table.Find("shutter"), plan, "controller");
+  SetOptionText(table.Find("mask-shots"), plan, "backlit");
+  table.Check(plan);
+  plan.Validate();
+  EXPECT_EQ(plan.stops, 24);
+  EXPECT_EQ(plan.settle_ms, 150);
+  EXPECT_EQ(plan.shutter, "controller");
+  EXPECT_EQ(plan.mask_shots, "backlit");
+  studio::CapturePlan bad = plan;
+  SetOptionText(table.Find("shutter"), bad, "remote");
+  EXPECT_THAT([&] { table.Check(bad); },
+              ::testing::ThrowsMessage<InvalidArgument>(::testing::HasSubstr("--shutter")));
+  SetOptionText(table.Find("stops"), bad, "0");
+  EXPECT_THROW(table.Check(bad), InvalidArgument);
+  EXPECT_TRUE(table.Find("delete-from-camera").info.advanced);
 }
 
 TEST(FrameStatsTest, PercentilesOfTheLoggedFrames) {

@@ -31,6 +31,7 @@
 #include <vector>
 
 #include "carousel/core/camera_model.h"
+#include "carousel/core/options.h"
 
 namespace carousel::studio {
 
@@ -64,6 +65,9 @@ struct CapturePlan {
   int backlight_settle_ms = 50;  // wait after switching the backlight before firing
   double move_timeout_s = 60.0;
   double camera_timeout_s = 60.0;
+  // Every field a person sets (core/options.h): the window's capture-plan panel in hardware
+  // mode. Its names are flag names; rig.json keeps its own ("settle_ms").
+  static const OptionTable<CapturePlan>& Fields();
   void Validate() const;
 };
 
