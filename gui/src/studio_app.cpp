@@ -254,6 +254,13 @@ void StudioApp::Screenshot(const std::string& name) {
     CAROUSEL_LOG_ERROR("carousel-studio: cannot write the screenshot " << file.string());
 }
 
+void StudioApp::ForgetSessionView() {
+  ClearThumbs();
+  held_out_.reset();
+  DeleteTexture(&held_out_photo_);
+  DeleteTexture(&held_out_render_);
+}
+
 void StudioApp::ClearThumbs() {
   for (Thumb& t : thumbs_) {
     DeleteTexture(&t.photo);
@@ -282,10 +289,7 @@ StudioApp::LoadedSession StudioApp::LoadSession(const std::filesystem::path& fol
 
 void StudioApp::OpenSession(const std::filesystem::path& session) {
   if (session != session_) {
-    ClearThumbs();
-    held_out_.reset();
-    DeleteTexture(&held_out_photo_);
-    DeleteTexture(&held_out_render_);
+    ForgetSessionView();
   }
   session_ = session;
   photos_.Watch(session);
@@ -310,10 +314,7 @@ void StudioApp::Poll() {
     // A new job: the panels follow its session.
     last_job_id_ = job.id;
     if (job.session != session_) {
-      ClearThumbs();
-      held_out_.reset();
-      DeleteTexture(&held_out_photo_);
-      DeleteTexture(&held_out_render_);
+      ForgetSessionView();
       report_ = nlohmann::json();
       stage_seconds_.clear();
       held_out_views_.clear();

@@ -55,6 +55,7 @@ class StudioApp {
   void StartHeldOutLoad(int view);
   void Screenshot(const std::string& name);
   void ClearThumbs();
+  void ForgetSessionView();  // thumbnails and the held-out comparison of the last session
 
   void DrawStudio();
   void DrawOperator();
