@@ -170,7 +170,7 @@ void PhotoWatcher::Scan(const std::filesystem::path& folder) {
     return;  // not written yet, or being replaced: the next scan reads it
   }
   for (const studio::SessionView& view : session.views) {
-    const std::string stem = studio::ViewStem(view.camera, view.stop);
+    const std::string stem = studio::ViewStem(view.camera, view.stop, view.pass);
     const bool has_mask = !view.mask.empty() && IsFile(folder / view.mask);
     {
       std::lock_guard<std::mutex> lock(mutex_);

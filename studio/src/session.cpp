@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <ctime>
 #include <numbers>
@@ -55,6 +56,7 @@ void WriteSessionManifest(const std::filesystem::path& folder, const Session& se
     if (!view.given_mask.empty()) entry["given_mask"] = view.given_mask;
     if (!view.given_mask_sha256.empty()) entry["given_mask_sha256"] = view.given_mask_sha256;
     if (view.trigger_offset_ms >= 0) entry["trigger_offset_ms"] = view.trigger_offset_ms;
+    if (view.pass != 0) entry["pass"] = view.pass;
     views.push_back(entry);
   }
   json manifest = {{"format", "carousel-session"},
@@ -67,6 +69,18 @@ void WriteSessionManifest(const std::filesystem::path& folder, const Session& se
                    {"stages", session.stages}};
   if (session.world_from_dataset)
     manifest["world_from_dataset"] = Rigid3dToJson(*session.world_from_dataset);
+  if (!session.passes.empty()) {
+    json passes = json::array();
+    for (const SessionPass& pass : session.passes) {
+      json entry = {{"orientation", pass.orientation}};
+      if (!pass.registration.empty()) entry["registration"] = pass.registration;
+      if (!pass.registration_note.empty()) entry["registration_note"] = pass.registration_note;
+      if (pass.table_from_object)
+        entry["table_from_object"] = Rigid3dToJson(*pass.table_from_object);
+      passes.push_back(entry);
+    }
+    manifest["passes"] = passes;
+  }
   if (!session.stage_inputs.empty()) manifest["stage_inputs"] = session.stage_inputs;
   if (!session.stage_seconds.empty()) manifest["stage_seconds"] = session.stage_seconds;
   if (!session.ground_truth.empty()) {
@@ -74,6 +88,21 @@ void WriteSessionManifest(const std::filesystem::path& folder, const Session& se
                                 {"masks", session.ground_truth.masks},
                                 {"depth", session.ground_truth.depth},
                                 {"depth_unit_m", session.ground_truth.depth_unit_m}};
+    if (!session.ground_truth.table_from_object.empty()) {
+      json poses = json::array();
+      for (const Rigid3d& pose : session.ground_truth.table_from_object)
+        poses.push_back(Rigid3dToJson(pose));
+      manifest["ground_truth"]["table_from_object"] = poses;
+    }
+    if (!session.ground_truth.eval_views.empty()) {
+      json eval = json::array();
+      for (const EvalView& view : session.ground_truth.eval_views)
+        eval.push_back({{"image", view.image},
+                        {"mask", view.mask},
+                        {"name", view.name},
+                        {"camera_model", CameraModelToJson(view.camera_model)}});
+      manifest["ground_truth"]["eval_views"] = eval;
+    }
   }
   WriteFileAtomic(folder / kManifestName, manifest.dump(2) + "\n");
 }
@@ -116,7 +145,38 @@ Session ReadSession(const std::filesystem::path& folder) {
     view.stop = entry.Int("stop");
     view.table_angle_deg = entry.Number("table_angle_deg");
     view.camera_model = CameraModelFromJson(entry.Object("camera_model"));
+    view.pass = entry.OptionalInt("pass").value_or(0);
+    if (view.pass < 0) entry.Fail("pass must be >= 0, got " + std::to_string(view.pass));
     session.views.push_back(view);
+  }
+  if (read.Has("passes")) {
+    for (const JsonReader& entry : read.Array("passes")) {
+      SessionPass pass;
+      pass.orientation = entry.String("orientation");
+      pass.registration = entry.OptionalString("registration").value_or("");
+      pass.registration_note = entry.OptionalString("registration_note").value_or("");
+      if (const auto pose = entry.OptionalObject("table_from_object"))
+        pass.table_from_object = Rigid3dFromJson(*pose);
+      if (pass.registration != "" && pass.registration != "registered" &&
+          pass.registration != "ambiguous" && pass.registration != "failed")
+        entry.Fail("registration must be registered, ambiguous or failed, got '" +
+                   pass.registration + "'");
+      if (pass.registration == "registered" && !pass.table_from_object)
+        entry.Fail("a registered pass has no table_from_object");
+      session.passes.push_back(pass);
+    }
+  }
+  int last_pass = 0;
+  for (std::size_t i = 0; i < session.views.size(); ++i) {
+    const int pass = session.views[i].pass;
+    if (pass != 0 && pass >= static_cast<int>(session.passes.size()))
+      read.Fail("views[" + std::to_string(i) + "] belongs to pass " + std::to_string(pass) +
+                " but the session lists " + std::to_string(session.passes.size()) + " passes");
+    if (pass < last_pass)
+      read.Fail("views[" + std::to_string(i) + "] of pass " + std::to_string(pass) +
+                " follows a view of pass " + std::to_string(last_pass) +
+                " (each pass's views follow the earlier passes')");
+    last_pass = pass;
   }
   session.stages = read.OptionalStringMap("stages").value_or(session.stages);
   session.stage_inputs = read.OptionalStringMap("stage_inputs").value_or(session.stage_inputs);
@@ -133,17 +193,60 @@ Session ReadSession(const std::filesystem::path& folder) {
       session.ground_truth.depth.push_back(depth.AsRelativePath(kFolder));
     }
     session.ground_truth.depth_unit_m = truth->Number("depth_unit_m");
+    if (truth->Has("table_from_object")) {
+      for (const JsonReader& pose : truth->Array("table_from_object"))
+        session.ground_truth.table_from_object.push_back(Rigid3dFromJson(pose));
+    }
+    if (truth->Has("eval_views")) {
+      for (const JsonReader& entry : truth->Array("eval_views")) {
+        EvalView view;
+        view.image = entry.RelativePath("image", kFolder);
+        view.mask = entry.RelativePath("mask", kFolder);
+        view.name = entry.OptionalString("name").value_or("");
+        view.camera_model = CameraModelFromJson(entry.Object("camera_model"));
+        session.ground_truth.eval_views.push_back(view);
+      }
+    }
   }
   return session;
 }
 
-std::string ViewStem(int camera, int stop) {
-  char text[32];
-  std::snprintf(text, sizeof text, "cam%d_stop%02d", camera, stop);
+std::string ViewStem(int camera, int stop, int pass) {
+  char text[48];
+  if (pass > 0)
+    std::snprintf(text, sizeof text, "pass%d_cam%d_stop%02d", pass, camera, stop);
+  else
+    std::snprintf(text, sizeof text, "cam%d_stop%02d", camera, stop);
   return text;
 }
 
+bool HasSeveralPasses(const Session& session) {
+  return std::any_of(session.views.begin(), session.views.end(),
+                     [](const SessionView& view) { return view.pass != 0; });
+}
+
 std::vector<View> SessionViews(const std::filesystem::path& folder, const Session& session) {
+  std::vector<View> views;
+  views.reserve(session.views.size());
+  for (const SessionView& entry : session.views) {
+    if (entry.pass == 0) {
+      views.emplace_back(entry.camera_model, folder / entry.image,
+                         entry.mask.empty() ? std::filesystem::path() : folder / entry.mask,
+                         entry.table_angle_deg * std::numbers::pi / 180.0);
+      continue;
+    }
+    const SessionPass& pass = session.passes.at(static_cast<std::size_t>(entry.pass));
+    if (pass.registration != "registered" || !pass.table_from_object) break;
+    CameraModel camera = entry.camera_model;
+    camera.cam_from_world = camera.cam_from_world * *pass.table_from_object;
+    views.emplace_back(camera, folder / entry.image,
+                       entry.mask.empty() ? std::filesystem::path() : folder / entry.mask,
+                       entry.table_angle_deg * std::numbers::pi / 180.0);
+  }
+  return views;
+}
+
+std::vector<View> SessionTableViews(const std::filesystem::path& folder, const Session& session) {
   std::vector<View> views;
   views.reserve(session.views.size());
   for (const SessionView& entry : session.views) {

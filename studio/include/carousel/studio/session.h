@@ -46,22 +46,53 @@ struct SessionView {
   // starts from it instead of segmenting the photo, and checks it against the other views.
   std::string given_mask;
   std::string given_mask_sha256;
-  int camera = 0;                // index of the camera in the rig
-  int stop = 0;                  // index of the turntable stop
+  int camera = 0;  // index of the camera in the rig
+  int stop = 0;    // index of the turntable stop
+  // The pass it belongs to (Session::passes): 0 = the first, whose turntable frame is the
+  // object's frame.
+  int pass = 0;
   double table_angle_deg = 0.0;  // table angle at capture
-  CameraModel camera_model;      // exact calibration, cam_from_world at this angle
-  std::string sha256;            // of the photo as downloaded (empty: not recorded)
+  // Exact calibration, cam_from_world at this angle, in its pass's own turntable frame (the
+  // object frame for pass 0; SessionViews maps later passes through their registration).
+  CameraModel camera_model;
+  std::string sha256;  // of the photo as downloaded (empty: not recorded)
   // When the shutter was triggered, milliseconds after the first camera's trigger at this
   // stop (the trigger skew between cameras); < 0 when unknown.
   double trigger_offset_ms = -1.0;
 };
 
+// A photo the simulator took for evaluation only, never used by the pipeline: e.g. from below
+// the product, where no pass's camera looks (ground_truth "eval_views").
+struct EvalView {
+  std::string image;
+  std::string mask;          // exact silhouette
+  CameraModel camera_model;  // in the object frame
+  std::string name;          // what it shows ("below")
+};
+
 struct GroundTruth {
-  std::string mesh;                // relative path of the scene surface (turntable frame)
+  std::string mesh;                // relative path of the scene surface (object frame)
   std::vector<std::string> masks;  // per view, exact silhouettes
   std::vector<std::string> depth;  // per view, 16-bit PNG, units of depth_unit_m, 0 = none
   double depth_unit_m = 1e-4;
+  // Per pass (Session::passes), where the simulator laid the product: the pass's turntable
+  // frame from the object frame (identity for pass 0). Empty for one pass.
+  std::vector<Rigid3d> table_from_object;
+  std::vector<EvalView> eval_views;
   bool empty() const { return mesh.empty() && masks.empty() && depth.empty(); }
+};
+
+// One pass of the turntable with the product in one orientation (capture plan
+// "orientations"): pass 0 stands it as the photographer put it first, and its turntable frame
+// is the object frame; later passes lay it down another way and are registered to pass 0 by
+// the reconstruct stage (recon/registration.h).
+struct SessionPass {
+  std::string orientation;  // how it lies, as the plan or the operator named it ("upright")
+  // Passes >= 1: "" (not registered yet), "registered", "ambiguous" or "failed". Only a
+  // registered pass's views reach the model.
+  std::string registration;
+  std::string registration_note;  // the residual, or why it was not registered, for people
+  std::optional<Rigid3d> table_from_object;  // set when "registered"
 };
 
 struct Session {
@@ -74,6 +105,8 @@ struct Session {
   // frame map into the session's world through it); unset when the frame is the dataset's own.
   std::optional<Rigid3d> world_from_dataset;
   std::vector<SessionView> views;
+  // Empty, or one entry per pass (views name theirs); views of later passes follow pass 0's.
+  std::vector<SessionPass> passes;
   GroundTruth ground_truth;
   std::map<std::string, std::string> stages;  // stage name -> state ("done", ...)
   // stage name -> fingerprint of the inputs it ran on (pipeline.h), recorded after it finished
@@ -89,12 +122,21 @@ Session ReadSession(const std::filesystem::path& folder);
 // Writes <folder>/session.json atomically. \throw IoError.
 void WriteSessionManifest(const std::filesystem::path& folder, const Session& session);
 
-// The session's photos as Views (absolute paths, cameras, angles, masks when present).
+// The session's photos as Views (absolute paths, cameras, angles, masks when present), the
+// cameras in the object frame. A later pass's views are left out until it is registered; they
+// follow pass 0's, so a view's index is the same here and in session.views for every view
+// returned.
 std::vector<View> SessionViews(const std::filesystem::path& folder, const Session& session);
+// Every photo, each camera in its own pass's turntable frame (what the silhouettes and the
+// registration work in).
+std::vector<View> SessionTableViews(const std::filesystem::path& folder, const Session& session);
+// Whether the session has views of more than one pass.
+bool HasSeveralPasses(const Session& session);
 
 // The file stem of the photo camera `camera` takes at turntable stop `stop`: "cam0_stop03";
-// its backlit mask shot's is ViewStem + kMaskShotSuffix ("cam0_stop03_backlit").
-std::string ViewStem(int camera, int stop);
+// its backlit mask shot's is ViewStem + kMaskShotSuffix ("cam0_stop03_backlit"). Passes after
+// the first prefix theirs: "pass1_cam0_stop03".
+std::string ViewStem(int camera, int stop, int pass = 0);
 inline constexpr const char* kMaskShotSuffix = "_backlit";
 
 // The session's backlit mask shots as Views (the photos' cameras), one per view; empty unless
