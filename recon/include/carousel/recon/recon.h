@@ -1,4 +1,5 @@
-// recon: shape from silhouette. This header includes the three stages.
+// recon: shape from silhouette. This header includes the stages (and the registration of a
+// second pass).
 //
 // Input: std::vector<View> (photo + camera), never a calibration file. Stages, each
 // `Result Stage(const Inputs&, const Options&, Progress&)`:
@@ -13,6 +14,7 @@
 #pragma once
 
 #include "carousel/recon/mesh_optimization.h"
+#include "carousel/recon/registration.h"
 #include "carousel/recon/reprojection.h"
 #include "carousel/recon/silhouette.h"
 #include "carousel/recon/visual_hull.h"

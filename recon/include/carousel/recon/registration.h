@@ -1,0 +1,86 @@
+// Registration of a second pass: the product photographed again lying another way (on its
+// side, upside down), found in the first pass's (the object's) frame from the silhouettes
+// alone, with no help from the operator.
+//
+// Each pass carves its own visual hull in its own turntable frame. Both hulls contain the
+// product, so at the right pose every surface point of the first pass's hull that belongs to
+// the product projects inside every silhouette of the second pass, and the other way round;
+// where a hull is too large (what its pass could not see: the underside, concavities) its
+// points stray outside, and those are truncated so that they do not pull. The cost is the
+// sum of squares of the truncated distances, in metres at the point, of each hull's surface
+// points outside the other pass's silhouettes (distance transforms of the masks, bilinear).
+//
+// Search: a coarse level (masks of ~200 px, a few hundred points, up to 8 views per pass)
+// scores `rotations` uniformly sampled rotations, each with the translation that lays the two
+// hulls' centroids on each other; the best distinct ones are refined by Levenberg-Marquardt
+// (numeric Jacobian, 6 parameters: a rotation about the product's centre and a translation)
+// at the coarse and a middle level, the best three distinct at the finest (masks of up to
+// `max_side_px`). A runner-up pose at least `distinct_deg` away whose residual is within
+// `ambiguity_ratio` of the best makes the registration ambiguous (a nearly symmetric product):
+// it is reported, never silently accepted.
+// Units: metres; frames as View cameras say (reference: the object frame, pass: its table's).
+#pragma once
+
+#include <optional>
+#include <vector>
+
+#include "carousel/core/options.h"
+#include "carousel/core/progress.h"
+#include "carousel/core/rigid3.h"
+#include "carousel/core/view.h"
+
+namespace carousel::recon {
+
+struct RegistrationOptions {
+  // Rotations scored at the coarse level, 100..200000.
+  int rotations = 4000;
+  // Distinct coarse poses refined, 1..64.
+  int candidates = 12;
+  // Poses whose rotations differ by more than this are distinct, degrees (0, 90].
+  double distinct_deg = 10.0;
+  // A distinct runner-up whose residual is within this factor of the best's makes the pose
+  // ambiguous, > 1.
+  double ambiguity_ratio = 1.25;
+  // The passes do not show the same product when the best pose's RMS residual exceeds this
+  // fraction of the product's size (the diagonal of its box), (0, 1).
+  double max_residual = 0.004;
+  // Surface points per hull at the finest level, 100..100000.
+  int points = 4000;
+  // The finest level's masks: longest side at most this, pixels, 256..20000.
+  int max_side_px = 1600;
+  // Worker threads; 0 = one per hardware thread.
+  int threads = 0;
+  static const OptionTable<RegistrationOptions>& Fields();
+  void Validate() const;
+};
+
+struct RegistrationResult {
+  // The pass's turntable frame from the reference's (the object) frame.
+  Rigid3d table_from_object;
+  // RMS over every (point, view) pair of the truncated distance outside the silhouettes at
+  // the finest level: metres, and pixels of the full-size photos.
+  double residual_m = 0.0;
+  double residual_px = 0.0;
+  double size_m = 0.0;  // the reference hull's box diagonal
+  // Whether the best pose's residual is within max_residual of the size.
+  bool matches = false;
+  // A distinct pose (>= distinct_deg away) nearly as good: the pose is not determined.
+  bool ambiguous = false;
+  double runner_up_ratio = 0.0;  // the runner-up's residual / the best's (0: none)
+  double runner_up_deg = 0.0;    // its rotation's distance from the best's
+  std::optional<Rigid3d> runner_up;
+  int rotations_scored = 0;
+  int points_reference = 0, points_pass = 0;
+  double seconds_hulls = 0.0, seconds_search = 0.0, seconds_refine = 0.0, seconds_total = 0.0;
+};
+
+// \pre every view has a mask (View::Mask()); at least 2 views in each pass.
+// \throw InvalidArgument (too few views, no mask, bad options), FormatError (an empty
+//        silhouette, naming the view; a pass whose own silhouettes carve nothing), Cancelled.
+RegistrationResult RegisterPass(const std::vector<View>& reference, const std::vector<View>& pass,
+                                const RegistrationOptions& options, Progress& progress);
+
+// The angle of the rotation that takes a to b, degrees.
+double RotationDistanceDeg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b);
+
+}  // namespace carousel::recon

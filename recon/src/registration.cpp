@@ -1,0 +1,509 @@
+#include "carousel/recon/registration.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <numeric>
+#include <random>
+
+#include <Eigen/Cholesky>
+#include <opencv2/imgproc.hpp>
+
+#include "carousel/core/error.h"
+#include "carousel/core/parallel.h"
+#include "carousel/core/timer.h"
+#include "carousel/recon/visual_hull.h"
+
+namespace carousel::recon {
+namespace {
+
+// One view at one level: its camera scaled to the level's mask, and per pixel the distance to
+// the nearest object pixel (0 on the object).
+struct LevelView {
+  CameraModel camera;
+  cv::Mat outside;       // CV_32FC1
+  double factor = 1.0;   // level pixels per full-size pixel
+};
+
+struct Level {
+  std::vector<LevelView> reference, pass;
+  std::vector<Eigen::Vector3d> reference_points;  // object frame
+  std::vector<Eigen::Vector3d> pass_points;       // the pass's table frame
+  double truncation_m = 0.0;
+  double pixel_m = 0.0;  // a level pixel at the product, metres (typical)
+};
+
+struct Pose {
+  Rigid3d table_from_object;
+  double cost = std::numeric_limits<double>::infinity();  // sum of squared residuals
+  double rms = std::numeric_limits<double>::infinity();
+};
+
+LevelView MakeLevelView(const View& view, int max_side) {
+  const cv::Mat mask = view.Mask();
+  LevelView level;
+  level.factor = std::min(1.0, static_cast<double>(max_side) / std::max(mask.cols, mask.rows));
+  cv::Mat small = mask;
+  if (level.factor < 1.0) {
+    cv::resize(mask, small,
+               cv::Size(std::max(1, static_cast<int>(std::lround(mask.cols * level.factor))),
+                        std::max(1, static_cast<int>(std::lround(mask.rows * level.factor)))),
+               0, 0, cv::INTER_AREA);
+    level.factor = static_cast<double>(small.cols) / mask.cols;
+    level.camera = view.camera().Scaled(level.factor);
+  } else {
+    level.camera = view.camera();
+  }
+  const cv::Mat background = small < 128;
+  cv::distanceTransform(background, level.outside, cv::DIST_L2, cv::DIST_MASK_PRECISE);
+  return level;
+}
+
+// Up to `count` views spread evenly over `views`.
+std::vector<std::size_t> Spread(std::size_t size, std::size_t count) {
+  std::vector<std::size_t> picked;
+  count = std::min(count, size);
+  for (std::size_t k = 0; k < count; ++k) picked.push_back(k * size / count);
+  return picked;
+}
+
+// `count` of `points`, picked by a fixed shuffle (the same every run).
+std::vector<Eigen::Vector3d> Subsample(const std::vector<Eigen::Vector3d>& points,
+                                       std::size_t count) {
+  if (points.size() <= count) return points;
+  std::vector<std::size_t> order(points.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::mt19937_64 random(0x5eed);
+  std::shuffle(order.begin(), order.end(), random);
+  std::vector<Eigen::Vector3d> picked;
+  picked.reserve(count);
+  for (std::size_t k = 0; k < count; ++k) picked.push_back(points[order[k]]);
+  return picked;
+}
+
+// The truncated distance (metres at the point) of `world` outside view's silhouette: 0 inside
+// and on the boundary, `truncation` where it lies behind the camera or outside the frame.
+double Outside(const LevelView& view, const Eigen::Vector3d& world, double truncation) {
+  const Eigen::Vector3d cam = view.camera.cam_from_world * world;
+  if (cam.z() <= 1e-6) return truncation;
+  const Eigen::Vector2d pixel = view.camera.ProjectFromCam(cam);
+  const int w = view.outside.cols, h = view.outside.rows;
+  if (!(pixel.x() >= 0.0 && pixel.y() >= 0.0 && pixel.x() <= w - 1 && pixel.y() <= h - 1))
+    return truncation;
+  const int x0 = std::min(static_cast<int>(pixel.x()), w - 2 < 0 ? 0 : w - 2);
+  const int y0 = std::min(static_cast<int>(pixel.y()), h - 2 < 0 ? 0 : h - 2);
+  const double fx = pixel.x() - x0, fy = pixel.y() - y0;
+  const int x1 = std::min(x0 + 1, w - 1), y1 = std::min(y0 + 1, h - 1);
+  const float* r0 = view.outside.ptr<float>(y0);
+  const float* r1 = view.outside.ptr<float>(y1);
+  const double d = (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x1]) + fy * ((1 - fx) * r1[x0] + fx * r1[x1]);
+  // The transform measures to the nearest object pixel's centre: the boundary is half a
+  // pixel nearer.
+  const double px = std::max(0.0, d - 0.5);
+  return std::min(truncation, px * cam.z() / view.camera.fx);
+}
+
+std::size_t ResidualCount(const Level& level) {
+  return level.reference_points.size() * level.pass.size() +
+         level.pass_points.size() * level.reference.size();
+}
+
+// Every residual of `pose` at `level`, into `out` (ResidualCount entries).
+void Residuals(const Level& level, const Rigid3d& table_from_object, int threads,
+               std::vector<double>* out) {
+  out->resize(ResidualCount(level));
+  const Rigid3d object_from_table = table_from_object.Inverse();
+  const std::size_t n1 = level.reference_points.size(), n2 = level.pass_points.size();
+  const std::size_t m1 = level.reference.size(), m2 = level.pass.size();
+  double* r = out->data();
+  ParallelFor(n1 + n2, 256, threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      if (i < n1) {
+        const Eigen::Vector3d q = table_from_object * level.reference_points[i];
+        for (std::size_t j = 0; j < m2; ++j)
+          r[i * m2 + j] = Outside(level.pass[j], q, level.truncation_m);
+      } else {
+        const std::size_t k = i - n1;
+        const Eigen::Vector3d q = object_from_table * level.pass_points[k];
+        for (std::size_t j = 0; j < m1; ++j)
+          r[n1 * m2 + k * m1 + j] = Outside(level.reference[j], q, level.truncation_m);
+      }
+    }
+  });
+}
+
+double SumOfSquares(const std::vector<double>& r) {
+  double sum = 0.0;
+  for (const double value : r) sum += value * value;
+  return sum;
+}
+
+Pose Evaluate(const Level& level, const Rigid3d& table_from_object, int threads) {
+  std::vector<double> r;
+  Residuals(level, table_from_object, threads, &r);
+  Pose pose;
+  pose.table_from_object = table_from_object;
+  pose.cost = SumOfSquares(r);
+  pose.rms = std::sqrt(pose.cost / std::max<std::size_t>(1, r.size()));
+  return pose;
+}
+
+// The pose moved by delta: a rotation (angle-axis, first three) about `centre` (in the
+// table frame) and a translation (last three).
+Rigid3d Moved(const Rigid3d& pose, const Eigen::Matrix<double, 6, 1>& delta,
+              const Eigen::Vector3d& centre) {
+  const Eigen::Vector3d omega = delta.head<3>();
+  const double angle = omega.norm();
+  const Eigen::Matrix3d turn =
+      angle > 0 ? Eigen::AngleAxisd(angle, omega / angle).toRotationMatrix()
+                : Eigen::Matrix3d::Identity();
+  Rigid3d moved;
+  moved.rotation = turn * pose.rotation;
+  moved.translation = turn * (pose.translation - centre) + centre + delta.tail<3>();
+  return moved;
+}
+
+// Levenberg-Marquardt on the pose at one level.
+Pose Refine(const Level& level, const Pose& start, const Eigen::Vector3d& object_centre,
+            int iterations, int threads, Progress& progress) {
+  Pose best = start.cost < std::numeric_limits<double>::infinity()
+                  ? start
+                  : Evaluate(level, start.table_from_object, threads);
+  const double radius = std::max(1e-3, level.truncation_m * 5.0);
+  const double step_t = 0.25 * level.pixel_m;
+  const double step_r = step_t / radius;
+  double lambda = 1e-3;
+  std::vector<double> r0, rk;
+  std::vector<std::vector<double>> columns(6);
+  for (int iteration = 0; iteration < iterations; ++iteration) {
+    progress.CheckCancelled();
+    Residuals(level, best.table_from_object, threads, &r0);
+    const Eigen::Vector3d centre = best.table_from_object * object_centre;
+    for (int k = 0; k < 6; ++k) {
+      Eigen::Matrix<double, 6, 1> delta = Eigen::Matrix<double, 6, 1>::Zero();
+      delta[k] = k < 3 ? step_r : step_t;
+      Residuals(level, Moved(best.table_from_object, delta, centre), threads, &rk);
+      columns[k].resize(rk.size());
+      for (std::size_t i = 0; i < rk.size(); ++i) columns[k][i] = (rk[i] - r0[i]) / delta[k];
+    }
+    Eigen::Matrix<double, 6, 6> jtj = Eigen::Matrix<double, 6, 6>::Zero();
+    Eigen::Matrix<double, 6, 1> jtr = Eigen::Matrix<double, 6, 1>::Zero();
+    for (std::size_t i = 0; i < r0.size(); ++i) {
+      Eigen::Matrix<double, 6, 1> row;
+      for (int k = 0; k < 6; ++k) row[k] = columns[k][i];
+      if (row.isZero()) continue;
+      jtj.selfadjointView<Eigen::Upper>().rankUpdate(row);
+      jtr += row * r0[i];
+    }
+    jtj = jtj.selfadjointView<Eigen::Upper>();
+    bool improved = false;
+    for (int attempt = 0; attempt < 6 && !improved; ++attempt) {
+      Eigen::Matrix<double, 6, 6> damped = jtj;
+      for (int k = 0; k < 6; ++k) damped(k, k) += lambda * std::max(jtj(k, k), 1e-12) + 1e-12;
+      const Eigen::Matrix<double, 6, 1> delta = -damped.ldlt().solve(jtr);
+      if (!delta.allFinite()) break;
+      const Pose trial = Evaluate(level, Moved(best.table_from_object, delta, centre), threads);
+      if (trial.cost < best.cost) {
+        const double gain = best.cost - trial.cost;
+        best = trial;
+        lambda = std::max(1e-7, lambda / 3.0);
+        improved = true;
+        if (gain < 1e-6 * best.cost) return best;
+      } else {
+        lambda *= 8.0;
+      }
+    }
+    if (!improved) break;
+  }
+  return best;
+}
+
+// Compass search on the pose: each of the six directions (rotations about the product's centre,
+// translations) tried both ways, the step halved when none improves, down to `min_steps`
+// halvings. Slow but sure where the cost is flat and kinked (the hinge at the silhouettes'
+// boundaries) and Levenberg-Marquardt stalls.
+Pose CompassSearch(const Level& level, Pose best, const Eigen::Vector3d& object_centre,
+                   double step_r, double step_t, int halvings, int threads, Progress& progress) {
+  for (int halving = 0; halving < halvings; ++halving) {
+    for (int round = 0; round < 4; ++round) {
+      progress.CheckCancelled();
+      bool improved = false;
+      for (int k = 0; k < 6; ++k) {
+        for (const double sign : {1.0, -1.0}) {
+          Eigen::Matrix<double, 6, 1> delta = Eigen::Matrix<double, 6, 1>::Zero();
+          delta[k] = sign * (k < 3 ? step_r : step_t);
+          const Pose trial = Evaluate(
+              level, Moved(best.table_from_object, delta, best.table_from_object * object_centre),
+              threads);
+          if (trial.cost < best.cost) {
+            best = trial;
+            improved = true;
+            break;
+          }
+        }
+      }
+      if (!improved) break;
+    }
+    step_r *= 0.5;
+    step_t *= 0.5;
+  }
+  return best;
+}
+
+// Uniformly distributed rotations (Shoemake's method with a fixed seed: the same every run).
+std::vector<Eigen::Matrix3d> SampleRotations(int count) {
+  std::vector<Eigen::Matrix3d> rotations;
+  rotations.reserve(static_cast<std::size_t>(count));
+  std::mt19937_64 random(0x0a11ce);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  rotations.push_back(Eigen::Matrix3d::Identity());
+  while (static_cast<int>(rotations.size()) < count) {
+    const double u1 = uniform(random), u2 = uniform(random), u3 = uniform(random);
+    const double a = std::sqrt(1 - u1), b = std::sqrt(u1);
+    const Eigen::Quaterniond q(b * std::cos(2 * std::numbers::pi * u3), a * std::sin(2 * std::numbers::pi * u2),
+                               a * std::cos(2 * std::numbers::pi * u2), b * std::sin(2 * std::numbers::pi * u3));
+    rotations.push_back(q.normalized().toRotationMatrix());
+  }
+  return rotations;
+}
+
+// Surface points of the pass's own visual hull (its own table frame), on a coarse grid.
+std::vector<Eigen::Vector3d> HullPoints(const std::vector<View>& views, int threads,
+                                        Progress& progress, Eigen::AlignedBox3d* box) {
+  VisualHullOptions options;
+  options.resolution = 96;
+  options.proxy_max_faces = 0;
+  options.min_view_consistency = 0.0;
+  options.threads = threads;
+  const VisualHullResult hull = ComputeVisualHull(views, options, progress);
+  std::vector<Eigen::Vector3d> points;
+  points.reserve(hull.mesh.n_vertices());
+  for (const auto vertex : hull.mesh.vertices()) {
+    const auto& p = hull.mesh.point(vertex);
+    points.emplace_back(p[0], p[1], p[2]);
+  }
+  *box = Eigen::AlignedBox3d();
+  for (const Eigen::Vector3d& p : points) box->extend(p);
+  return points;
+}
+
+Level MakeLevel(const std::vector<View>& reference, const std::vector<View>& pass,
+                const std::vector<Eigen::Vector3d>& reference_points,
+                const std::vector<Eigen::Vector3d>& pass_points, std::size_t max_views,
+                int max_side, std::size_t points, double truncation_m, double size_m,
+                int threads) {
+  Level level;
+  const std::vector<std::size_t> r = Spread(reference.size(), max_views);
+  const std::vector<std::size_t> p = Spread(pass.size(), max_views);
+  level.reference.resize(r.size());
+  level.pass.resize(p.size());
+  ParallelFor(r.size() + p.size(), 1, threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      if (i < r.size())
+        level.reference[i] = MakeLevelView(reference[r[i]], max_side);
+      else
+        level.pass[i - r.size()] = MakeLevelView(pass[p[i - r.size()]], max_side);
+    }
+  });
+  level.reference_points = Subsample(reference_points, points);
+  level.pass_points = Subsample(pass_points, points);
+  level.truncation_m = truncation_m;
+  // A level pixel at the product: the median over the views of distance / focal length.
+  std::vector<double> pixel;
+  const Eigen::Vector3d centre =
+      std::accumulate(reference_points.begin(), reference_points.end(), Eigen::Vector3d(0, 0, 0)) /
+      std::max<std::size_t>(1, reference_points.size());
+  for (const LevelView& v : level.reference)
+    pixel.push_back((v.camera.cam_from_world * centre).z() / v.camera.fx);
+  std::nth_element(pixel.begin(), pixel.begin() + pixel.size() / 2, pixel.end());
+  level.pixel_m = pixel.empty() ? 1e-3 * size_m : pixel[pixel.size() / 2];
+  return level;
+}
+
+Eigen::Vector3d Centroid(const std::vector<Eigen::Vector3d>& points) {
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector3d& p : points) sum += p;
+  return sum / std::max<std::size_t>(1, points.size());
+}
+
+// The poses, best first, keeping only those at least `min_deg` from every better one.
+std::vector<Pose> Distinct(std::vector<Pose> poses, double min_deg, std::size_t count) {
+  std::sort(poses.begin(), poses.end(), [](const Pose& a, const Pose& b) { return a.cost < b.cost; });
+  std::vector<Pose> kept;
+  for (const Pose& pose : poses) {
+    if (kept.size() >= count) break;
+    const bool near = std::any_of(kept.begin(), kept.end(), [&](const Pose& k) {
+      return RotationDistanceDeg(k.table_from_object.rotation, pose.table_from_object.rotation) <
+             min_deg;
+    });
+    if (!near) kept.push_back(pose);
+  }
+  return kept;
+}
+
+}  // namespace
+
+double RotationDistanceDeg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
+  const double c = std::clamp(0.5 * ((a.transpose() * b).trace() - 1.0), -1.0, 1.0);
+  return std::acos(c) * 180.0 / std::numbers::pi;
+}
+
+const OptionTable<RegistrationOptions>& RegistrationOptions::Fields() {
+  using O = RegistrationOptions;
+  static const OptionTable<O> table = [] {
+    OptionTable<O> t;
+    t.Add(&O::rotations, {.name = "registration-rotations",
+                          .help = "rotations a later pass's coarse search scores",
+                          .min = 100,
+                          .max = 200000,
+                          .advanced = true});
+    t.Add(&O::candidates, {.name = "registration-candidates",
+                           .help = "distinct coarse poses refined",
+                           .min = 1,
+                           .max = 64,
+                           .advanced = true});
+    t.Add(&O::distinct_deg, {.name = "registration-distinct",
+                             .help = "poses whose rotations differ by more are distinct",
+                             .unit = "deg",
+                             .min = 0,
+                             .max = 90,
+                             .min_exclusive = true,
+                             .advanced = true});
+    t.Add(&O::ambiguity_ratio,
+          {.name = "ambiguity-ratio",
+           .help = "a distinct pose whose residual is within this factor of the best's makes a "
+                   "pass's pose ambiguous",
+           .min = 1,
+           .min_exclusive = true,
+           .advanced = true});
+    t.Add(&O::max_residual,
+          {.name = "max-registration-residual",
+           .help = "a pass whose best pose leaves a larger RMS residual (fraction of the "
+                   "product's size) does not show the same product",
+           .min = 0,
+           .max = 1,
+           .min_exclusive = true,
+           .max_exclusive = true,
+           .advanced = true});
+    t.Add(&O::points, {.name = "registration-points",
+                       .help = "surface points per hull at the finest level",
+                       .min = 100,
+                       .max = 100000,
+                       .advanced = true});
+    t.Add(&O::max_side_px, {.name = "registration-max-side",
+                            .help = "the finest level's masks are at most this long",
+                            .unit = "px",
+                            .min = 256,
+                            .max = 20000,
+                            .advanced = true});
+    return t;
+  }();
+  return table;
+}
+
+void RegistrationOptions::Validate() const { Fields().Check(*this); }
+
+RegistrationResult RegisterPass(const std::vector<View>& reference, const std::vector<View>& pass,
+                                const RegistrationOptions& options, Progress& progress) {
+  options.Validate();
+  CAROUSEL_THROW_IF(reference.size() < 2 || pass.size() < 2, InvalidArgument,
+                    "registration needs at least 2 views in each pass, got "
+                        << reference.size() << " and " << pass.size());
+  Stopwatch total;
+  RegistrationResult result;
+  const int threads = options.threads;
+
+  Stopwatch watch;
+  Eigen::AlignedBox3d reference_box, pass_box;
+  const std::vector<Eigen::Vector3d> reference_points =
+      HullPoints(reference, threads, progress, &reference_box);
+  const std::vector<Eigen::Vector3d> pass_points = HullPoints(pass, threads, progress, &pass_box);
+  result.size_m = reference_box.sizes().norm();
+  result.points_reference = static_cast<int>(reference_points.size());
+  result.points_pass = static_cast<int>(pass_points.size());
+  result.seconds_hulls = watch.ElapsedSeconds();
+  const double size = result.size_m;
+  const Eigen::Vector3d c1 = Centroid(reference_points), c2 = Centroid(pass_points);
+
+  // Coarse: every sampled rotation, with the centroids laid on each other.
+  watch.Restart();
+  const Level coarse = MakeLevel(reference, pass, reference_points, pass_points, 8, 192, 300,
+                                 0.08 * size, size, threads);
+  const std::vector<Eigen::Matrix3d> rotations = SampleRotations(options.rotations);
+  std::vector<Pose> scored(rotations.size());
+  ParallelFor(rotations.size(), 16, threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      progress.CheckCancelled();
+      const Rigid3d pose(rotations[i], c2 - rotations[i] * c1);
+      scored[i] = Evaluate(coarse, pose, 1);
+    }
+  });
+  result.rotations_scored = static_cast<int>(rotations.size());
+  std::vector<Pose> candidates =
+      Distinct(scored, 20.0, static_cast<std::size_t>(options.candidates));
+  result.seconds_search = watch.ElapsedSeconds();
+
+  // Refinement: every candidate at the coarse and the middle level, the best three distinct
+  // at the finest.
+  watch.Restart();
+  const Level middle = MakeLevel(reference, pass, reference_points, pass_points, 12, 480, 1000,
+                                 0.03 * size, size, threads);
+  for (Pose& candidate : candidates) {
+    candidate = Refine(coarse, candidate, c1, 10, threads, progress);
+    candidate = Refine(middle, Evaluate(middle, candidate.table_from_object, threads), c1, 10,
+                       threads, progress);
+  }
+  candidates = Distinct(candidates, options.distinct_deg, 3);
+  const Level fine = MakeLevel(reference, pass, reference_points, pass_points,
+                               std::numeric_limits<std::size_t>::max(), options.max_side_px,
+                               static_cast<std::size_t>(options.points), 0.012 * size, size,
+                               threads);
+  // At the finest level the truncation narrows from 8 to 1.5 pixels: what a hull has too
+  // much (the underside its pass did not see) lies further out than that at the right pose,
+  // and stops pulling once it is cut off.
+  for (Pose& candidate : candidates) {
+    for (const double pixels : {8.0, 3.0, 1.5}) {
+      Level narrowed = fine;
+      narrowed.truncation_m = std::min(fine.truncation_m, pixels * fine.pixel_m);
+      candidate = Refine(narrowed, Evaluate(narrowed, candidate.table_from_object, threads), c1,
+                         12, threads, progress);
+    }
+    candidate = Evaluate(fine, candidate.table_from_object, threads);
+  }
+  std::sort(candidates.begin(), candidates.end(),
+            [](const Pose& a, const Pose& b) { return a.cost < b.cost; });
+  // The best: on to the bottom of its flat valley by compass search.
+  {
+    Level narrowed = fine;
+    narrowed.truncation_m = std::min(fine.truncation_m, 1.5 * fine.pixel_m);
+    const double radius = 0.5 * size;
+    Pose& best = candidates.front();
+    best = CompassSearch(narrowed, Evaluate(narrowed, best.table_from_object, threads), c1,
+                         2.0 * fine.pixel_m / radius, 2.0 * fine.pixel_m, 6, threads, progress);
+    best = Evaluate(fine, best.table_from_object, threads);
+  }
+  result.seconds_refine = watch.ElapsedSeconds();
+
+  const Pose& best = candidates.front();
+  result.table_from_object = best.table_from_object;
+  result.residual_m = best.rms;
+  // In full-size pixels: the level's pixel at the product, over its scale.
+  const double full_pixel_m = fine.pixel_m * (fine.pass.empty() ? 1.0 : fine.pass.front().factor);
+  result.residual_px = best.rms / std::max(1e-12, full_pixel_m);
+  result.matches = best.rms <= options.max_residual * size;
+  for (std::size_t k = 1; k < candidates.size(); ++k) {
+    const double deg = RotationDistanceDeg(best.table_from_object.rotation,
+                                           candidates[k].table_from_object.rotation);
+    if (deg < options.distinct_deg) continue;
+    result.runner_up = candidates[k].table_from_object;
+    result.runner_up_deg = deg;
+    result.runner_up_ratio = candidates[k].rms / std::max(1e-12, best.rms);
+    result.ambiguous = result.runner_up_ratio < options.ambiguity_ratio;
+    break;
+  }
+  result.seconds_total = total.ElapsedSeconds();
+  return result;
+}
+
+}  // namespace carousel::recon
