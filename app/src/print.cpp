@@ -13,10 +13,13 @@ void PrintReconstruct(const std::filesystem::path& s, const studio::ReconstructR
       << (result.redecided > 0
               ? ", " + std::to_string(result.redecided) + " repaired by the other views"
               : "")
-      << "; " << result.seconds_silhouettes << " s)\n"
-      << "hull " << (s / "recon/hull.ply").string() << ": " << result.hull_faces << " faces, "
-      << std::setprecision(3) << result.voxel_size_m * 1e3 << " mm voxels (" << std::setprecision(2)
-      << result.seconds_hull << " s)\n"
+      << "; " << result.seconds_silhouettes << " s)\n";
+  for (const studio::PassOutcome& pass : result.passes)
+    out << (pass.status == "registered" ? "registered " : "NOT USED: ") << pass.note << " ("
+        << pass.views << " views)\n";
+  out << std::fixed << std::setprecision(2) << "hull " << (s / "recon/hull.ply").string() << ": "
+      << result.hull_faces << " faces, " << std::setprecision(3) << result.voxel_size_m * 1e3
+      << " mm voxels (" << std::setprecision(2) << result.seconds_hull << " s)\n"
       << "mesh " << (s / "recon/mesh.ply").string() << ": " << result.mesh_faces << " faces ("
       << result.seconds_mesh << " s)\n";
   if (!result.agreement.empty()) {

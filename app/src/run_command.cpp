@@ -36,6 +36,18 @@ void AskForBoardPlacement(int index, int placements, std::ostream& err) {
   }
 }
 
+// Hardware product passes: the operator lays the product down another way; Enter continues.
+void AskToTurnProduct(int pass, int passes, std::ostream& err) {
+  err << "\npass " << pass + 1 << " of " << passes
+      << ": lay the product down another way (on its side, upside down), near the plate's "
+         "centre"
+      << (::isatty(STDIN_FILENO) ? ", then press Enter" : "") << std::endl;
+  if (::isatty(STDIN_FILENO)) {
+    std::string line;
+    std::getline(std::cin, line);
+  }
+}
+
 int RunOneButton(RunArgs& args, Io& io) {
   studio::RunResult result;
   if (args.calibration) {
@@ -45,6 +57,9 @@ int RunOneButton(RunArgs& args, Io& io) {
       AskForBoardPlacement(index, placements, io.err);
     };
   }
+  args.options.turn_product = [&io](int pass, int passes) {
+    AskToTurnProduct(pass, passes, io.err);
+  };
   if (args.resume.empty() && !args.sim && args.rig.empty()) {
     io.err << "carousel run: say where to capture: --sim (the simulated rig), --rig RIG.json "
               "(the studio's turntable and cameras), or --resume SESSION\n";

@@ -292,15 +292,25 @@ void StudioController::StartRun(studio::RunOptions options) {
   options.Validate();
   const std::filesystem::path session =
       options.out / studio::SessionNameForProduct(options.product);
+  // On hardware the operator places the board, or lays the product down for a later pass,
+  // and confirms in the window.
+  auto wait_for_operator = [this](int index, int placements, bool product) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    status_.board_prompt = BoardPrompt{index, placements, product};
+    board_confirmed_ = false;
+    status_.stage_changes = ++change_base_ + tracker_.changes();
+    board_placed_.wait(lock, [this] { return board_confirmed_ || token_.IsCancelled(); });
+    status_.board_prompt.reset();
+    if (token_.IsCancelled())
+      throw Cancelled(product ? "laying the product down cancelled" : "board placement cancelled");
+  };
   if (options.calibration && options.hardware) {
-    options.place_board = [this](int index, int placements) {
-      std::unique_lock<std::mutex> lock(mutex_);
-      status_.board_prompt = BoardPrompt{index, placements};
-      board_confirmed_ = false;
-      status_.stage_changes = ++change_base_ + tracker_.changes();
-      board_placed_.wait(lock, [this] { return board_confirmed_ || token_.IsCancelled(); });
-      status_.board_prompt.reset();
-      if (token_.IsCancelled()) throw Cancelled("board placement cancelled");
+    options.place_board = [wait_for_operator](int index, int placements) {
+      wait_for_operator(index, placements, false);
+    };
+  } else if (options.hardware && options.hardware->capture.orientations > 1) {
+    options.turn_product = [wait_for_operator](int pass, int passes) {
+      wait_for_operator(pass, passes, true);
     };
   }
   const std::string product = options.product;

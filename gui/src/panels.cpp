@@ -131,7 +131,13 @@ void StudioApp::DrawSessionPanel(const JobStatus& job, float) {
       }
     }
   }
-  if (job.board_prompt) {
+  if (job.board_prompt && job.board_prompt->product) {
+    ImGui::TextColored(kGreen,
+                       "Pass %d of %d: lay the product down another way (on its side, upside "
+                       "down), near the plate's centre",
+                       job.board_prompt->index + 1, job.board_prompt->placements);
+    if (ImGui::Button("The product lies so", ImVec2(-1.0f, 0.0f))) controller_.ConfirmBoardPlaced();
+  } else if (job.board_prompt) {
     ImGui::TextColored(kGreen, "Board placement %d of %d: stand the board on the turntable",
                        job.board_prompt->index + 1, job.board_prompt->placements);
     if (ImGui::Button("The board is in place", ImVec2(-1.0f, 0.0f)))

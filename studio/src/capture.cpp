@@ -62,8 +62,8 @@ std::vector<std::optional<T>> JoinAll(std::vector<std::future<T>>& futures,
 
 }  // namespace
 
-std::string MaskShotPath(int camera, int stop) {
-  return "images/" + ViewStem(camera, stop) + kMaskShotSuffix + ".jpg";
+std::string MaskShotPath(int camera, int stop, int pass) {
+  return "images/" + ViewStem(camera, stop, pass) + kMaskShotSuffix + ".jpg";
 }
 
 // Removes the temporary files atomic writes leave behind when a process is killed.
@@ -123,8 +123,20 @@ CaptureResult CaptureSession(const std::filesystem::path& folder, Session& sessi
   session.views.clear();
   for (const auto& [name, view] : recorded) session.views.push_back(view);
   const int cameras = static_cast<int>(rig.cameras.size());
-  // A calibration session turns the table once per board placement.
-  const int total_stops = plan.stops * placements;
+  // A calibration session turns the table once per board placement; a product session once per
+  // orientation (pass), its views tagged with their pass.
+  const int passes = rig.place_board ? 1 : std::max(1, plan.orientations);
+  const int total_stops = plan.stops * placements * passes;
+  if (passes > 1 && static_cast<int>(session.passes.size()) != passes) {
+    session.passes.clear();
+    for (int pass = 0; pass < passes; ++pass) {
+      SessionPass entry;
+      entry.orientation = pass < static_cast<int>(rig.orientation_names.size())
+                              ? rig.orientation_names[pass]
+                              : "pass " + std::to_string(pass + 1);
+      session.passes.push_back(entry);
+    }
+  }
   const int shots_per_view = mask_shots ? 2 : 1;
   const int total = total_stops * cameras * shots_per_view;
   int done = 0;
@@ -142,7 +154,7 @@ CaptureResult CaptureSession(const std::filesystem::path& folder, Session& sessi
     if (mask_shot) {
       SessionView* entry = view_of(view.image);
       CAROUSEL_CHECK(entry != nullptr, "the mask shot's view " << view.image << " is recorded");
-      entry->mask_shot = MaskShotPath(view.camera, view.stop);
+      entry->mask_shot = MaskShotPath(view.camera, view.stop, view.pass);
       entry->mask_shot_sha256 = FileSha256(folder / entry->mask_shot);
     } else {
       SessionView entry = view;
@@ -150,6 +162,10 @@ CaptureResult CaptureSession(const std::filesystem::path& folder, Session& sessi
       entry.mask_shot.clear();
       entry.mask_shot_sha256.clear();
       session.views.push_back(entry);
+      // Each pass's views follow the earlier passes' (a photo of an earlier pass retaken
+      // after a resume goes back among its own).
+      std::stable_sort(session.views.begin(), session.views.end(),
+                       [](const SessionView& x, const SessionView& y) { return x.pass < y.pass; });
     }
     WriteSessionManifest(folder, session);
     progress.Report(static_cast<std::size_t>(++done), static_cast<std::size_t>(total));
@@ -167,15 +183,19 @@ CaptureResult CaptureSession(const std::filesystem::path& folder, Session& sessi
   bool homed = false;
   int moving_to = -1;  // the stop the table was last sent to
   int placed = -1;     // the board placement in place
+  int laid = -1;       // the product's pass in place (-1: as the session found it)
   for (int stop = 0; stop < total_stops; ++stop) {
     progress.CheckCancelled();
     const double angle = angle_of(stop);
+    const int pass = passes > 1 ? stop / plan.stops : 0;
+    const int stop_in_pass = passes > 1 ? stop % plan.stops : stop;
     std::vector<Shot> to_take;
     for (int c = 0; c < cameras; ++c) {
       SessionView view;
-      view.image = "images/" + ViewStem(c, stop) + ".jpg";
+      view.image = "images/" + ViewStem(c, stop_in_pass, pass) + ".jpg";
       view.camera = c;
-      view.stop = stop;
+      view.stop = stop_in_pass;
+      view.pass = pass;
       view.table_angle_deg = 360.0 * (stop % plan.stops) / plan.stops;
       view.camera_model = sim::CameraAtTableAngle(rig.cam_from_table[c], angle);
       const auto it = recorded.find(view.image);
@@ -184,7 +204,7 @@ CaptureResult CaptureSession(const std::filesystem::path& folder, Session& sessi
       const bool have_mask_shot = !mask_shots || (have_photo && !it->second.mask_shot.empty());
       for (const bool mask_shot : {false, true}) {
         if (mask_shot ? have_mask_shot : have_photo) continue;
-        const std::string file = mask_shot ? MaskShotPath(c, stop) : view.image;
+        const std::string file = mask_shot ? MaskShotPath(c, stop_in_pass, pass) : view.image;
         if (std::filesystem::exists(folder / file)) {
           // On disk but not recorded: a kill between the download and the manifest. A mask
           // shot is adopted once its photo is recorded (below, in order).
@@ -208,6 +228,15 @@ CaptureResult CaptureSession(const std::filesystem::path& folder, Session& sessi
       CAROUSEL_LOG_INFO("board placement " << placed + 1 << " of " << placements);
       rig.place_board(placed);
     }
+    // A later pass: the product is laid down another way before its first photo (after a
+    // resume, again before the first photo it still lacks: the operator confirms it lies so).
+    if (rig.turn_product && pass != laid && (pass > 0 || laid >= 0)) {
+      laid = pass;
+      CAROUSEL_LOG_INFO("pass " << pass + 1 << " of " << passes << ": the product "
+                                << session.passes[static_cast<std::size_t>(pass)].orientation);
+      rig.turn_product(pass);
+    }
+    if (pass == 0 && laid < 0) laid = 0;
     if (!homed) {
       rig.turntable->Home(move_timeout);
       homed = true;
@@ -330,7 +359,7 @@ CaptureResult CaptureSession(const std::filesystem::path& folder, Session& sessi
   }
   std::sort(session.views.begin(), session.views.end(),
             [](const SessionView& a, const SessionView& b) {
-              return std::tie(a.stop, a.camera) < std::tie(b.stop, b.camera);
+              return std::tie(a.pass, a.stop, a.camera) < std::tie(b.pass, b.stop, b.camera);
             });
   const bool capture_changed =
       result.photos_taken + result.photos_adopted + result.photos_retaken > 0;

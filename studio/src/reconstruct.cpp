@@ -1,6 +1,7 @@
 #include "carousel/studio/reconstruct.h"
 
 #include <algorithm>
+#include <iomanip>
 #include <limits>
 #include <map>
 #include <numeric>
@@ -181,6 +182,155 @@ recon::SilhouettesResult FindSilhouettes(const std::filesystem::path& folder,
   return result;
 }
 
+// FindSilhouettes for each pass on its own (each in its own turntable frame: the plate is
+// removed and the views checked against each other there).
+recon::SilhouettesResult FindSilhouettesPerPass(
+    const std::filesystem::path& folder, const Session& session, const std::vector<View>& views,
+    const std::vector<cv::Mat>& backgrounds, const std::vector<View>& mask_shots,
+    const ReconstructOptions& options, Progress& progress) {
+  if (!HasSeveralPasses(session))
+    return FindSilhouettes(folder, session, views, backgrounds, mask_shots, options, progress);
+  recon::SilhouettesResult result;
+  result.masks.resize(views.size());
+  result.stats.resize(views.size());
+  const int passes = session.views.back().pass + 1;
+  for (int pass = 0; pass < passes; ++pass) {
+    std::vector<std::size_t> which;
+    for (std::size_t i = 0; i < session.views.size(); ++i)
+      if (session.views[i].pass == pass) which.push_back(i);
+    if (which.empty()) continue;
+    Session sub = session;
+    sub.views.clear();
+    std::vector<View> sub_views, sub_shots;
+    std::vector<cv::Mat> sub_backgrounds;
+    for (const std::size_t i : which) {
+      sub.views.push_back(session.views[i]);
+      sub_views.push_back(views[i]);
+      if (!mask_shots.empty()) sub_shots.push_back(mask_shots[i]);
+      if (!backgrounds.empty()) sub_backgrounds.push_back(backgrounds[i]);
+    }
+    const recon::SilhouettesResult found =
+        FindSilhouettes(folder, sub, sub_views, sub_backgrounds, sub_shots, options, progress);
+    for (std::size_t k = 0; k < which.size(); ++k) {
+      result.masks[which[k]] = found.masks[k];
+      result.stats[which[k]] = found.stats[k];
+    }
+  }
+  return result;
+}
+
+// Object pixels on the frame's edge: the product runs out of the photo.
+bool TouchesEdge(const cv::Mat& mask) {
+  const int w = mask.cols, h = mask.rows;
+  int touching = 0;
+  for (int x = 0; x < w; ++x)
+    touching += (mask.at<uchar>(0, x) >= 128) + (mask.at<uchar>(h - 1, x) >= 128);
+  for (int y = 0; y < h; ++y)
+    touching += (mask.at<uchar>(y, 0) >= 128) + (mask.at<uchar>(y, w - 1) >= 128);
+  return touching > (w + h) / 100;
+}
+
+std::string Millimetres(double metres) {
+  std::ostringstream text;
+  text << std::fixed << std::setprecision(2) << metres * 1e3 << " mm";
+  return text.str();
+}
+
+// Registers every later pass to pass 0 (views: every photo in its own table frame, masks
+// set), records the outcome in the session, and maps the registered passes' cameras into the
+// object frame. Returns the outcomes; a pass that is not registered (out of frame, another
+// product, an ambiguous pose) is named with the reason and left out of the model.
+std::vector<PassOutcome> RegisterPasses(const Session& session_in, Session& session,
+                                        std::vector<View>& views, const ReconstructOptions& options,
+                                        Progress& progress) {
+  std::vector<PassOutcome> outcomes;
+  const int passes = session_in.views.back().pass + 1;
+  std::vector<View> reference;
+  for (std::size_t i = 0; i < views.size(); ++i)
+    if (session.views[i].pass == 0) reference.push_back(views[i]);
+  for (int pass = 1; pass < passes; ++pass) {
+    PassOutcome outcome;
+    outcome.pass = pass;
+    SessionPass& record = session.passes.at(static_cast<std::size_t>(pass));
+    outcome.orientation = record.orientation;
+    const std::string name = "pass " + std::to_string(pass + 1) + " (" + record.orientation + ")";
+    std::vector<std::size_t> which;
+    for (std::size_t i = 0; i < views.size(); ++i)
+      if (session.views[i].pass == pass) which.push_back(i);
+    outcome.views = static_cast<int>(which.size());
+    std::vector<View> moved;
+    int out_of_frame = 0;
+    std::string first_out;
+    for (const std::size_t i : which) {
+      moved.push_back(views[i]);
+      if (TouchesEdge(views[i].Mask())) {
+        if (out_of_frame++ == 0) first_out = views[i].name();
+      }
+    }
+    record.table_from_object.reset();
+    if (which.size() < 2) {
+      outcome.status = "failed";
+      outcome.note = name + " has " + std::to_string(which.size()) + " view(s); it needs 2 or more";
+    } else if (out_of_frame > options.max_out_of_frame * static_cast<double>(which.size())) {
+      outcome.status = "failed";
+      outcome.note = name + ": the product runs out of the frame in " +
+                     std::to_string(out_of_frame) + " of " + std::to_string(which.size()) +
+                     " views (the first: " + first_out +
+                     "); lay it nearer the plate's centre or move the cameras back";
+    } else {
+      try {
+        recon::RegistrationOptions registration = options.registration;
+        registration.threads = options.hull.threads;
+        const recon::RegistrationResult found =
+            recon::RegisterPass(reference, moved, registration, progress);
+        outcome.registration = found;
+        std::ostringstream note;
+        note << name << ": residual " << std::fixed << std::setprecision(2) << found.residual_px
+             << " px (" << Millimetres(found.residual_m) << ")";
+        if (found.runner_up)
+          note << ", the next pose " << std::setprecision(1) << found.runner_up_deg
+               << " deg away fits " << std::setprecision(2) << found.runner_up_ratio
+               << " times worse";
+        if (!found.matches) {
+          outcome.status = "failed";
+          outcome.note = note.str() + ": its silhouettes do not fit pass 1's at any pose (over " +
+                         Millimetres(options.registration.max_residual * found.size_m) +
+                         "), so it does not show the same product";
+        } else if (found.ambiguous) {
+          outcome.status = "ambiguous";
+          outcome.note = note.str() +
+                         ": the pose is ambiguous, the product's silhouettes look alike turned "
+                         "(a symmetric product); lay it down so that it does not look alike, "
+                         "or leave the pass out";
+        } else {
+          outcome.status = "registered";
+          outcome.note = note.str();
+          record.table_from_object = found.table_from_object;
+        }
+      } catch (const Cancelled&) {
+        throw;
+      } catch (const Error& e) {
+        outcome.status = "failed";
+        outcome.note = name + " cannot be registered: " + e.what();
+      }
+    }
+    record.registration = outcome.status;
+    record.registration_note = outcome.note;
+    if (outcome.status == "registered") {
+      CAROUSEL_LOG_INFO(outcome.note);
+      for (const std::size_t i : which) {
+        CameraModel camera = views[i].camera();
+        camera.cam_from_world = camera.cam_from_world * *record.table_from_object;
+        views[i].mutable_camera() = camera;
+      }
+    } else {
+      CAROUSEL_LOG_WARN(outcome.note << "; the model is made without it");
+    }
+    outcomes.push_back(outcome);
+  }
+  return outcomes;
+}
+
 }  // namespace
 
 std::vector<std::string> AdoptEditedMasks(const std::filesystem::path& folder, Session& session) {
@@ -209,6 +359,14 @@ const OptionTable<ReconstructOptions>& ReconstructOptions::Fields() {
           .Include(&ReconstructOptions::silhouettes, recon::SilhouetteOptions::Fields())
           .Include(&ReconstructOptions::hull, recon::VisualHullOptions::Fields())
           .Include(&ReconstructOptions::mesh, recon::MeshOptimizationOptions::Fields())
+          .Include(&ReconstructOptions::registration, recon::RegistrationOptions::Fields())
+          .Add(&ReconstructOptions::max_out_of_frame,
+               {.name = "max-out-of-frame",
+                .help = "a later pass is left out when more of its views show the product "
+                        "touching the frame's edge",
+                .min = 0,
+                .max = 1,
+                .advanced = true})
           .Add(&ReconstructOptions::max_outline_deviation_px,
                {.name = "max-outline-deviation",
                 .help = "a mesh whose outline strays further from the silhouettes on average is "
@@ -224,6 +382,8 @@ void ReconstructOptions::Validate() const {
   silhouettes.Validate();
   hull.Validate();
   mesh.Validate();
+  registration.Validate();
+  Fields().Check(*this);
 }
 
 ReconstructResult ReconstructSession(const std::filesystem::path& session_folder,
@@ -247,7 +407,7 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
     options.hull.use_floor = false;
   }
   AdoptEditedMasks(session_folder, session);
-  std::vector<View> views = SessionViews(session_folder, session);
+  std::vector<View> views = SessionTableViews(session_folder, session);
   const std::vector<View> mask_shots = SessionMaskShotViews(session_folder, session);
   ReconstructResult result;
   result.views = static_cast<int>(views.size());
@@ -259,8 +419,8 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
   std::vector<cv::Mat> backgrounds;
   if (options.silhouettes.method == recon::SilhouetteMethod::kDifference)
     backgrounds = LoadBackgrounds(session_folder, session);
-  const recon::SilhouettesResult silhouettes =
-      FindSilhouettes(session_folder, session, views, backgrounds, mask_shots, options, progress);
+  const recon::SilhouettesResult silhouettes = FindSilhouettesPerPass(
+      session_folder, session, views, backgrounds, mask_shots, options, progress);
   result.given_masks =
       static_cast<int>(std::count_if(silhouettes.stats.begin(), silhouettes.stats.end(),
                                      [](const recon::SilhouetteStats& s) { return s.given; }));
@@ -289,6 +449,26 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
   }
   result.seconds_silhouettes = watch.ElapsedSeconds();
 
+  // Later passes -> registered into the object frame, or left out (named, with the reason).
+  // The model is made from pass 0 and the registered passes that follow it (SessionViews).
+  std::vector<cv::Mat> masks = silhouettes.masks;
+  if (HasSeveralPasses(session)) {
+    watch.Restart();
+    const Session before = session;
+    result.passes = RegisterPasses(before, session, views, options, progress);
+    std::size_t used = 0;
+    while (used < views.size() &&
+           (session.views[used].pass == 0 ||
+            session.passes[static_cast<std::size_t>(session.views[used].pass)].registration ==
+                "registered"))
+      ++used;
+    views.resize(used);
+    masks.resize(used);
+    result.seconds_registration = watch.ElapsedSeconds();
+    session.stage_seconds["reconstruct/registration"] = result.seconds_registration;
+  }
+  result.model_views = static_cast<int>(views.size());
+
   // Visual hull -> recon/hull.ply. A broken hull stops here, with the views that carve it
   // apart named and their overlays in recon/diagnostics/ (the masks stay for inspection).
   watch.Restart();
@@ -297,8 +477,7 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
   try {
     hull = recon::ComputeVisualHull(views, options.hull, progress);
   } catch (const recon::InconsistentViews& e) {
-    const std::string where =
-        WriteDiagnostics(session_folder, views, silhouettes.masks, e.views(), nullptr);
+    const std::string where = WriteDiagnostics(session_folder, views, masks, e.views(), nullptr);
     throw FormatError(e.path(), e.reason() + "; each view's mask outline on its photo: " + where);
   }
   const std::size_t kept_faces = hull.mesh.n_faces();
@@ -311,8 +490,7 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
   if ((hull.components_dropped > kMaxHullPieces && views_disagree) ||
       dropped_fraction > kMaxDroppedFaceFraction) {
     const std::vector<std::size_t> culprits = CarvingViews(hull.view_consistency, 0.9, 3);
-    const std::string where =
-        WriteDiagnostics(session_folder, views, silhouettes.masks, culprits, &hull.mesh);
+    const std::string where = WriteDiagnostics(session_folder, views, masks, culprits, &hull.mesh);
     std::ostringstream reason;
     reason << "the visual hull breaks apart: " << hull.components_dropped
            << " pieces beside the largest (" << hull.faces_dropped << " of "
@@ -380,8 +558,7 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
       std::vector<std::size_t> named = CarvingViews(hull.view_consistency, 0.9, 1);
       for (const std::size_t v : disagreeing)
         if (std::find(named.begin(), named.end(), v) == named.end()) named.push_back(v);
-      const std::string where =
-          WriteDiagnostics(session_folder, views, silhouettes.masks, named, &mesh.mesh);
+      const std::string where = WriteDiagnostics(session_folder, views, masks, named, &mesh.mesh);
       std::ostringstream reason;
       reason << "the mesh does not reproduce " << disagreeing.size() << " view(s)' silhouettes"
              << " (IoU below " << kMinAgreementIoU << "):";

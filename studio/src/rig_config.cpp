@@ -42,6 +42,11 @@ const OptionTable<CapturePlan>& CapturePlan::Fields() {
                            .help = "a backlit mask shot beside every photo (the silhouettes "
                                    "come from it)",
                            .choices = {"none", "backlit"}});
+    t.Add(&P::orientations, {.name = "orientations",
+                             .help = "passes, the product laid down another way for each "
+                                     "(the operator is asked between them)",
+                             .min = 1,
+                             .max = 4});
     t.Add(&P::backlight_settle_ms, {.name = "backlight-settle-ms",
                                     .help = "wait after switching the backlight",
                                     .unit = "ms",
@@ -87,6 +92,8 @@ void CapturePlan::Validate() const {
       "capture.mask_shots must be \"none\" or \"backlit\", not \"" << mask_shots << "\"");
   CAROUSEL_THROW_IF(backlight_settle_ms < 0 || backlight_settle_ms > 10000, InvalidArgument,
                     "capture.backlight_settle_ms must be 0..10000");
+  CAROUSEL_THROW_IF(orientations < 1 || orientations > 4, InvalidArgument,
+                    "capture.orientations must be 1..4, not " << orientations);
 }
 
 void RigConfig::Validate() const {
@@ -141,6 +148,7 @@ std::string RigConfigToJsonText(const RigConfig& config) {
               {"shutter_pulse_ms", config.capture.shutter_pulse_ms},
               {"mask_shots", config.capture.mask_shots},
               {"backlight_settle_ms", config.capture.backlight_settle_ms},
+              {"orientations", config.capture.orientations},
               {"move_timeout_s", config.capture.move_timeout_s},
               {"camera_timeout_s", config.capture.camera_timeout_s}}},
             {"backdrop", config.backdrop}};
@@ -224,6 +232,7 @@ RigConfig RigConfigFromJsonText(const std::string& text, const std::filesystem::
   plan.mask_shots = capture.OptionalString("mask_shots").value_or(plan.mask_shots);
   plan.backlight_settle_ms =
       capture.OptionalInt("backlight_settle_ms").value_or(plan.backlight_settle_ms);
+  plan.orientations = capture.OptionalInt("orientations").value_or(plan.orientations);
   plan.move_timeout_s = capture.OptionalNumber("move_timeout_s").value_or(plan.move_timeout_s);
   plan.camera_timeout_s =
       capture.OptionalNumber("camera_timeout_s").value_or(plan.camera_timeout_s);

@@ -90,7 +90,17 @@ RigBackends OpenSimRig(const SimCaptureOptions& sim, const std::optional<Calibra
         camera->SetScene(boards.at(static_cast<std::size_t>(index)).first);
     };
   }
+  if (!plan && sim.orientations > 1) {
+    // The product laid down for the second pass: the simulated rig turns it itself.
+    Rigid3d laid;
+    auto turned = std::make_shared<sim::Scene>(LaidDownScene(*scene, sim, &laid));
+    rig.turn_product = [cameras, scene, turned](int pass) {
+      for (sim::SimCamera* camera : cameras) camera->SetScene(pass == 0 ? scene : turned);
+    };
+    rig.orientation_names = {"upright", sim.second_pose};
+  }
   rig.turntable = turntable;
+  rig.plan.orientations = plan ? 1 : sim.orientations;
   rig.plan.stops = sim.stops;
   rig.plan.settle_ms = 0;
   rig.plan.mask_shots = sim.mask_shots;
@@ -153,6 +163,14 @@ RigBackends OpenRig(const RigRequest& request) {
                        count = request.calibration->placements](int index) {
       if (place) place(index, count);
     };
+  }
+  if (request.hardware && !request.calibration && rig.plan.orientations > 1) {
+    rig.turn_product = [ask = request.turn_product, passes = rig.plan.orientations](int pass) {
+      if (ask) ask(pass, passes);
+    };
+    rig.orientation_names = {"upright"};
+    for (int pass = 1; pass < rig.plan.orientations; ++pass)
+      rig.orientation_names.push_back("laid down " + std::to_string(pass));
   }
   if (!request.calibration_file.empty()) ApplyCalibrationFile(request.calibration_file, &rig);
   return rig;

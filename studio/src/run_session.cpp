@@ -30,7 +30,7 @@ constexpr const char* kSessionCalibration = "calibration.json";
 const OptionTable<SimCaptureOptions>& SimRenderFields() {
   static const OptionTable<SimCaptureOptions> table = SimCaptureOptions::Fields().Only(
       {"material", "exposure", "contact-shadow", "cast-shadow", "backdrop-falloff", "vignetting",
-       "mask-shots", "backdrop"});
+       "mask-shots", "backdrop", "orientations", "second-pose", "pose-seed"});
   return table;
 }
 
@@ -129,6 +129,7 @@ RigRequest RigRequestFor(const RunOptions& options) {
           .hardware = options.hardware,
           .calibration = options.calibration,
           .place_board = options.place_board,
+          .turn_product = options.turn_product,
           .calibration_file = options.calibration_file};
 }
 

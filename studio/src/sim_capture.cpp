@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <map>
 #include <numbers>
+#include <random>
 
 #include <opencv2/core.hpp>
 
@@ -71,7 +72,7 @@ const std::vector<std::string>& RunSimFieldNames() {
       "scene",      "data",       "views",    "size",           "elevations",    "focal-mm",
       "distance",   "noise",      "seed",     "jpeg-quality",   "target-height", "scale",
       "yaw-deg",    "material",   "exposure", "contact-shadow", "cast-shadow",   "backdrop-falloff",
-      "vignetting", "mask-shots", "backdrop"};
+      "vignetting", "mask-shots", "backdrop", "orientations",   "second-pose"};
   return names;
 }
 
@@ -233,6 +234,31 @@ const OptionTable<SimCaptureOptions>& SimCaptureOptions::Fields() {
            .help = "light the scene (off: render the albedo)",
            .negative_name = "unlit"},
           [](O& o) -> OptionRef { return &o.render.lit; });
+    t.Add(&O::orientations,
+          {.name = "orientations",
+           .help = "passes of the turntable, the product lying another way in each (2: the "
+                   "second as --second-pose says)",
+           .min = 1,
+           .max = 2});
+    t.AddText(
+        {.name = "second-pose",
+         .help = "how the product lies in the second pass: side, upside-down, or random (any "
+                 "rotation from --pose-seed)",
+         .choices = {"side", "upside-down", "random"}},
+        [](const O& o) { return o.second_pose; },
+        [](O& o, const std::string& text) {
+          CheckOptionChoice({.name = "second-pose", .choices = {"side", "upside-down", "random"}},
+                            text);
+          o.second_pose = text;
+        });
+    t.Add(&O::pose_seed,
+          {.name = "pose-seed", .help = "seed of the random second pose", .advanced = true});
+    t.Add(&O::eval_below,
+          {.name = "eval-below",
+           .help = "evaluation photos from below the product (ground truth only, never used)",
+           .min = 0,
+           .max = 64,
+           .advanced = true});
     t.Add(&O::product, {.name = "product", .help = "product name for the manifest"});
     return t;
   }();
@@ -245,6 +271,44 @@ void SimCaptureOptions::Validate() const {
   placement.Validate();
   rig.Validate();
   render.Validate();
+}
+
+Rigid3d SecondPassRotation(const std::string& pose, const Eigen::AlignedBox3d& bounds,
+                           std::uint64_t seed) {
+  Eigen::Matrix3d rotation;
+  Eigen::Vector3d shift = Eigen::Vector3d::Zero();
+  if (pose == "side") {
+    // About the longest horizontal axis: a shoe lies on its side, a bottle on its flank.
+    const Eigen::Vector3d axis = bounds.sizes().x() >= bounds.sizes().y()
+                                     ? Eigen::Vector3d::UnitX()
+                                     : Eigen::Vector3d::UnitY();
+    rotation = Eigen::AngleAxisd(0.5 * std::numbers::pi, axis).toRotationMatrix();
+  } else if (pose == "upside-down") {
+    rotation = Eigen::AngleAxisd(std::numbers::pi, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  } else if (pose == "random") {
+    std::mt19937_64 random(seed);
+    std::normal_distribution<double> normal;
+    Eigen::Quaterniond q(normal(random), normal(random), normal(random), normal(random));
+    rotation = q.normalized().toRotationMatrix();
+    std::uniform_real_distribution<double> offset(-0.01, 0.01);
+    shift = Eigen::Vector3d(offset(random), offset(random), 0.0);
+  } else {
+    throw InvalidArgument("--second-pose must be side, upside-down or random, got '" + pose + "'");
+  }
+  return Rigid3d(rotation, shift);
+}
+
+sim::Scene LaidDownScene(const sim::Scene& scene, const SimCaptureOptions& options,
+                         Rigid3d* table_from_object) {
+  const Rigid3d turn = SecondPassRotation(options.second_pose, scene.Bounds(), options.pose_seed);
+  sim::Scene turned = scene;
+  turned.Transform(Rigid3d(turn.rotation, Eigen::Vector3d::Zero()));
+  const Eigen::AlignedBox3d box = turned.Bounds();
+  const Eigen::Vector3d offset(turn.translation.x() - box.center().x(),
+                               turn.translation.y() - box.center().y(), -box.min().z());
+  turned.Transform(Rigid3d(Eigen::Matrix3d::Identity(), offset));
+  *table_from_object = Rigid3d(turn.rotation, offset);
+  return turned;
 }
 
 bool IsSceneFile(const std::string& scene) {
@@ -315,51 +379,104 @@ SimCaptureResult SimulateCapture(const SimCaptureOptions& options,
                sim::Render(empty, rig[c], 0.0, render).image,
                {.jpeg_quality = options.jpeg_quality, .overwrite = false});
   }
-  const int total = options.stops * static_cast<int>(rig.size());
+  // The passes: the product as placed, then (orientations 2) laid down another way.
+  std::vector<sim::Scene> poses = {scene};
+  std::vector<Rigid3d> table_from_object = {Rigid3d()};
+  if (options.orientations > 1) {
+    Rigid3d laid;
+    poses.push_back(LaidDownScene(scene, options, &laid));
+    table_from_object.push_back(laid);
+    session.passes = {{.orientation = "upright"}, {.orientation = options.second_pose}};
+    session.ground_truth.table_from_object = table_from_object;
+  }
+  const int total = options.stops * static_cast<int>(rig.size() * poses.size());
   progress.BeginStage("render views");
   int done = 0;
-  for (int stop = 0; stop < options.stops; ++stop) {
-    const double angle_deg = 360.0 * stop / options.stops;
-    const double angle = angle_deg * std::numbers::pi / 180.0;
-    for (int c = 0; c < static_cast<int>(rig.size()); ++c) {
-      progress.CheckCancelled();
-      const CameraModel camera = sim::CameraAtTableAngle(rig[c], angle);
-      sim::RenderOptions render = options.render;
-      render.seed = options.render.seed * 1000003ULL + static_cast<std::uint64_t>(done);
-      Stopwatch watch;
-      const sim::RenderResult rendered = sim::Render(scene, camera, angle, render);
-      result.render_seconds += watch.ElapsedSeconds();
-      const std::string stem = ViewStem(c, stop);
-      SessionView view;
-      view.image = "images/" + stem + ".jpg";
-      view.camera = c;
-      view.stop = stop;
-      view.table_angle_deg = angle_deg;
-      view.camera_model = camera;
+  for (int pass = 0; pass < static_cast<int>(poses.size()); ++pass) {
+    for (int stop = 0; stop < options.stops; ++stop) {
+      const double angle_deg = 360.0 * stop / options.stops;
+      const double angle = angle_deg * std::numbers::pi / 180.0;
+      for (int c = 0; c < static_cast<int>(rig.size()); ++c) {
+        progress.CheckCancelled();
+        const CameraModel camera = sim::CameraAtTableAngle(rig[c], angle);
+        sim::RenderOptions render = options.render;
+        render.seed = options.render.seed * 1000003ULL + static_cast<std::uint64_t>(done);
+        Stopwatch watch;
+        const sim::RenderResult rendered = sim::Render(poses[pass], camera, angle, render);
+        result.render_seconds += watch.ElapsedSeconds();
+        const std::string stem = ViewStem(c, stop, pass);
+        SessionView view;
+        view.image = "images/" + stem + ".jpg";
+        view.camera = c;
+        view.stop = stop;
+        view.pass = pass;
+        view.table_angle_deg = angle_deg;
+        view.camera_model = camera;
+        WriteImage(staging / view.image, rendered.image,
+                   {.jpeg_quality = options.jpeg_quality, .overwrite = false});
+        if (options.mask_shots == "backlit") {
+          // The same stop with the backlight on (another shot: its own noise).
+          sim::RenderOptions backlit = render;
+          backlit.backlit = true;
+          backlit.seed = render.seed ^ 0x6a09e667f3bcc909ULL;
+          watch.Restart();
+          const cv::Mat shot = sim::Render(poses[pass], camera, angle, backlit).image;
+          result.render_seconds += watch.ElapsedSeconds();
+          view.mask_shot = "images/" + stem + kMaskShotSuffix + ".jpg";
+          WriteImage(staging / view.mask_shot, shot,
+                     {.jpeg_quality = options.jpeg_quality, .overwrite = false});
+        }
+        const std::string mask = "ground_truth/masks/" + stem + ".png";
+        const std::string depth = "ground_truth/depth/" + stem + ".png";
+        WriteImage(staging / mask, rendered.mask, {.overwrite = false});
+        cv::Mat depth16;
+        rendered.depth.convertTo(depth16, CV_16U, 1.0 / session.ground_truth.depth_unit_m);
+        WriteImage(staging / depth, depth16, {.png_compression = 1, .overwrite = false});
+        session.views.push_back(view);
+        session.ground_truth.masks.push_back(mask);
+        session.ground_truth.depth.push_back(depth);
+        progress.Report(++done, static_cast<std::size_t>(total));
+      }
+    }
+  }
+  // Evaluation photos from below (object frame), of the product as the last pass lays it and
+  // lit as it is there, without the plate: what no camera of the first pass sees.
+  if (options.eval_below > 0) {
+    folder.CreateFolder("ground_truth/eval");
+    const Eigen::Vector3d target = scene.Bounds().center();
+    const double distance = (rig.front().Centre() - target).norm();
+    const Rigid3d& last = table_from_object.back();
+    sim::RenderOptions render = options.render;
+    render.plate_radius_m = 0.0;
+    render.contact_shadow = 0.0;
+    render.cast_shadow = 0.0;
+    for (int k = 0; k < options.eval_below; ++k) {
+      const double azimuth = 2.0 * std::numbers::pi * (k + 0.5) / options.eval_below;
+      const double elevation = -30.0 * std::numbers::pi / 180.0;
+      const Eigen::Vector3d eye =
+          target + distance * Eigen::Vector3d(std::cos(elevation) * std::cos(azimuth),
+                                              std::cos(elevation) * std::sin(azimuth),
+                                              std::sin(elevation));
+      EvalView view;
+      view.camera_model = rig.front();
+      view.camera_model.cam_from_world = Rigid3d::LookAt(eye, target);
+      view.name = "below";
+      CameraModel in_pass = view.camera_model;
+      in_pass.cam_from_world = view.camera_model.cam_from_world * last.Inverse();
+      render.seed = options.render.seed * 1000003ULL + 777777ULL + static_cast<std::uint64_t>(k);
+      // Lit as a photo from that side is: the table turned so that the camera stands where
+      // the rig's cameras do (at -90 deg azimuth in the studio).
+      const Eigen::Vector3d centre = in_pass.Centre();
+      const double table_angle = -0.5 * std::numbers::pi - std::atan2(centre.y(), centre.x());
+      const sim::RenderResult rendered = sim::Render(poses.back(), in_pass, table_angle, render);
+      char stem[32];
+      std::snprintf(stem, sizeof stem, "below%02d", k);
+      view.image = std::string("ground_truth/eval/") + stem + ".jpg";
+      view.mask = std::string("ground_truth/eval/") + stem + "_mask.png";
       WriteImage(staging / view.image, rendered.image,
                  {.jpeg_quality = options.jpeg_quality, .overwrite = false});
-      if (options.mask_shots == "backlit") {
-        // The same stop with the backlight on (another shot: its own noise).
-        sim::RenderOptions backlit = render;
-        backlit.backlit = true;
-        backlit.seed = render.seed ^ 0x6a09e667f3bcc909ULL;
-        watch.Restart();
-        const cv::Mat shot = sim::Render(scene, camera, angle, backlit).image;
-        result.render_seconds += watch.ElapsedSeconds();
-        view.mask_shot = MaskShotPath(c, stop);
-        WriteImage(staging / view.mask_shot, shot,
-                   {.jpeg_quality = options.jpeg_quality, .overwrite = false});
-      }
-      const std::string mask = "ground_truth/masks/" + stem + ".png";
-      const std::string depth = "ground_truth/depth/" + stem + ".png";
-      WriteImage(staging / mask, rendered.mask, {.overwrite = false});
-      cv::Mat depth16;
-      rendered.depth.convertTo(depth16, CV_16U, 1.0 / session.ground_truth.depth_unit_m);
-      WriteImage(staging / depth, depth16, {.png_compression = 1, .overwrite = false});
-      session.views.push_back(view);
-      session.ground_truth.masks.push_back(mask);
-      session.ground_truth.depth.push_back(depth);
-      progress.Report(++done, static_cast<std::size_t>(total));
+      WriteImage(staging / view.mask, rendered.mask, {.overwrite = false});
+      session.ground_truth.eval_views.push_back(view);
     }
   }
   progress.EndStage();

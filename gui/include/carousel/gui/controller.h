@@ -81,9 +81,11 @@ enum class JobState { kIdle, kRunning, kSucceeded, kFailed, kCancelled };
 const char* JobStateName(JobState state);  // "idle", "running", ...
 
 // A calibration session on hardware waits for the board: placement `index` (0-based) of
-// `placements`; ConfirmBoardPlaced() continues.
+// `placements`; a product session of several orientations waits for the product to be laid
+// down for pass `index` of `placements` (`product`). ConfirmBoardPlaced() continues.
 struct BoardPrompt {
   int index = 0, placements = 0;
+  bool product = false;
 };
 
 // A snapshot of the job, for drawing.

@@ -39,8 +39,9 @@ struct CaptureResult {
 CaptureResult CaptureSession(const std::filesystem::path& folder, Session& session,
                              RigBackends& rig, int placements, Progress& progress);
 
-// The relative path of the backlit mask shot camera `camera` takes at stop `stop`.
-std::string MaskShotPath(int camera, int stop);
+// The relative path of the backlit mask shot camera `camera` takes at stop `stop` (of pass
+// `pass`).
+std::string MaskShotPath(int camera, int stop, int pass = 0);
 
 // Removes the temporary files atomic writes leave behind when a process is killed.
 void RemoveStaleTemporaries(const std::filesystem::path& folder);

@@ -11,6 +11,7 @@
 #pragma once
 
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -25,6 +26,11 @@ struct ReconstructOptions {
   recon::SilhouetteOptions silhouettes;
   recon::VisualHullOptions hull;
   recon::MeshOptimizationOptions mesh;
+  // Later passes (the product laid down another way) registered to the first.
+  recon::RegistrationOptions registration;
+  // A later pass is left out when more than this fraction of its views show the product
+  // touching the frame's edge (out of frame), 0..1.
+  double max_out_of_frame = 0.25;
   // A mesh whose outline deviates further than this from the silhouettes on average (pixels)
   // is made again with twice the faces, up to 8 x mesh.target_faces; 0 = never.
   double max_outline_deviation_px = 1.0;
@@ -33,18 +39,31 @@ struct ReconstructOptions {
   void Validate() const;
 };
 
-struct ReconstructResult {
+// What became of a later pass (Session::passes).
+struct PassOutcome {
+  int pass = 0;
+  std::string orientation;
+  std::string status;  // "registered", "ambiguous", "failed"
+  std::string note;    // the residual, or what is wrong, naming the pass
   int views = 0;
-  std::string method;              // the silhouette method used ("backlit", "key", ...)
-  int given_masks = 0;             // views whose mask was given (a dataset's, or edited by hand)
-  int redecided = 0;               // views the multi-view step segmented again or repaired
-  double min_mask_fraction = 0.0;  // smallest object fraction of a photo
+  std::optional<recon::RegistrationResult> registration;  // when it ran
+};
+
+struct ReconstructResult {
+  int views = 0;                    // photos segmented (every pass)
+  int model_views = 0;              // of them, those the hull and the mesh were made from
+  std::vector<PassOutcome> passes;  // passes after the first
+  std::string method;               // the silhouette method used ("backlit", "key", ...)
+  int given_masks = 0;              // views whose mask was given (a dataset's, or edited by hand)
+  int redecided = 0;                // views the multi-view step segmented again or repaired
+  double min_mask_fraction = 0.0;   // smallest object fraction of a photo
   std::size_t hull_faces = 0;
   double voxel_size_m = 0.0;
   std::size_t mesh_faces = 0;
   // The optimized mesh against each view's silhouette (pixels).
   std::vector<recon::SilhouetteAgreement> agreement;
   double seconds_silhouettes = 0.0;
+  double seconds_registration = 0.0;
   double seconds_hull = 0.0;
   double seconds_mesh = 0.0;
   double seconds_agreement = 0.0;

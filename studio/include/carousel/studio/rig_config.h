@@ -63,6 +63,10 @@ struct CapturePlan {
   // comes from the first.
   std::string mask_shots = "none";
   int backlight_settle_ms = 50;  // wait after switching the backlight before firing
+  // Passes of the turntable, the product lying another way in each (1..4): after each pass the
+  // operator is asked to lay it down another way (on its side, upside down); the later passes
+  // show its underside and are registered to the first by the reconstruct stage.
+  int orientations = 1;
   double move_timeout_s = 60.0;
   double camera_timeout_s = 60.0;
   // Every field a person sets (core/options.h): the window's capture-plan panel in hardware

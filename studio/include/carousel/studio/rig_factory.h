@@ -30,6 +30,11 @@ struct RigBackends {
   // Calibration sessions: puts the board in placement `index` (the simulated rig moves its
   // board; hardware asks the operator).
   std::function<void(int index)> place_board;
+  // Product sessions of plan.orientations > 1 passes: lays the product down for pass `pass`
+  // (the simulated rig turns its scene; hardware asks the operator), before its first photo.
+  std::function<void(int pass)> turn_product;
+  // How the product lies in each pass, for the manifest ("upright", "side", "laid down").
+  std::vector<std::string> orientation_names;
 };
 
 // What to open.
@@ -40,6 +45,9 @@ struct RigRequest {
   std::optional<CalibrationPlan> calibration;
   // Hardware calibration: asks the operator to place the board for placement `index`.
   std::function<void(int index, int placements)> place_board;
+  // Hardware product passes: asks the operator to lay the product down for pass `pass` (of
+  // `passes`); returns once it lies so.
+  std::function<void(int pass, int passes)> turn_product;
   // A rig calibration file whose cameras replace the rig's own (empty: none).
   std::filesystem::path calibration_file;
 };

@@ -41,6 +41,10 @@ struct RunOptions {
   // Hardware calibration sessions: called before the table turns for placement `index`
   // (0-based) once the board must stand there; it returns when it does.
   std::function<void(int index, int placements)> place_board;
+  // Hardware product sessions of more than one orientation (rig.json capture.orientations):
+  // called before the first photo of pass `pass` (1-based passes after the first: 1, 2, ...)
+  // once the product must lie another way; it returns when it does.
+  std::function<void(int pass, int passes)> turn_product;
   // A rig calibration file (calib/rig_calibration.h) whose cameras the photos get instead of
   // the rig's own (the simulator's ground truth, or rig.json's); copied into the session.
   std::filesystem::path calibration_file;

@@ -6,11 +6,13 @@
 // valid-looking half session. An existing session is never replaced unless `overwrite`.
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
 #include <string>
 #include <vector>
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 
 #include "carousel/core/options.h"
 #include "carousel/core/progress.h"
@@ -56,6 +58,17 @@ struct SimCaptureOptions {
   // "none", or "backlit": beside every photo a backlit mask shot (the backlight on), which the
   // silhouettes are taken from (CapturePlan::mask_shots).
   std::string mask_shots = "none";
+  // Passes of the turntable, each with the product lying another way (1 or 2): the second
+  // lies as `second_pose` says, "side" (on its side: turned 90 deg about its longest
+  // horizontal axis), "upside-down", or "random" (any rotation, from `pose_seed`, and off the
+  // plate's centre by up to 1 cm).
+  int orientations = 1;
+  std::string second_pose = "side";
+  std::uint64_t pose_seed = 1;
+  // Photos for evaluation only (ground_truth/eval/, never read by the pipeline): this many
+  // from below the product (elevation -30 deg in the object frame, evenly round it), rendered
+  // without the plate, the product lit as in the last pass.
+  int eval_below = 0;
   // The product name recorded in the manifest; empty = the scene's name.
   std::string product;
   // Replace an existing session folder (after the new one is complete).
@@ -69,6 +82,20 @@ struct SimCaptureOptions {
 // The file a scene name stands for. \throw InvalidArgument for an unknown name, IoError if the
 // file is missing.
 std::filesystem::path ResolveScene(const std::string& scene, const std::filesystem::path& data_dir);
+
+// How the product lies in the second pass (`pose` as SimCaptureOptions::second_pose; `bounds`
+// its box in the object frame): the rotation from the object frame, and how far off the
+// plate's centre it lies (x, y). SimulateCapture then centres the turned product on the
+// table's axis, plus that offset, and sets it on the plate.
+// \throw InvalidArgument for an unknown pose.
+Rigid3d SecondPassRotation(const std::string& pose, const Eigen::AlignedBox3d& bounds,
+                           std::uint64_t seed);
+
+// The product (`scene`, placed in the object frame) laid down for the second pass as
+// `options` say (second_pose, pose_seed): turned, centred on the table's axis (plus the
+// pose's offset) and set on the plate. `table_from_object` receives where it went.
+sim::Scene LaidDownScene(const sim::Scene& scene, const SimCaptureOptions& options,
+                         Rigid3d* table_from_object);
 
 // Whether `scene` is a file path rather than one of the model names.
 bool IsSceneFile(const std::string& scene);
