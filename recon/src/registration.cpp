@@ -22,8 +22,8 @@ namespace {
 // the nearest object pixel (0 on the object).
 struct LevelView {
   CameraModel camera;
-  cv::Mat outside;       // CV_32FC1
-  double factor = 1.0;   // level pixels per full-size pixel
+  cv::Mat outside;      // CV_32FC1
+  double factor = 1.0;  // level pixels per full-size pixel
 };
 
 struct Level {
@@ -97,7 +97,8 @@ double Outside(const LevelView& view, const Eigen::Vector3d& world, double trunc
   const int x1 = std::min(x0 + 1, w - 1), y1 = std::min(y0 + 1, h - 1);
   const float* r0 = view.outside.ptr<float>(y0);
   const float* r1 = view.outside.ptr<float>(y1);
-  const double d = (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x1]) + fy * ((1 - fx) * r1[x0] + fx * r1[x1]);
+  const double d =
+      (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x1]) + fy * ((1 - fx) * r1[x0] + fx * r1[x1]);
   // The transform measures to the nearest object pixel's centre: the boundary is half a
   // pixel nearer.
   const double px = std::max(0.0, d - 0.5);
@@ -149,15 +150,39 @@ Pose Evaluate(const Level& level, const Rigid3d& table_from_object, int threads)
   return pose;
 }
 
+// The fraction of the two hulls' points that lie further than `distance_m` outside some
+// silhouette of the other pass at `pose`: what the other pass's photos say is not there.
+double InconsistentFraction(const Level& level, const Rigid3d& table_from_object, double distance_m,
+                            int threads) {
+  std::vector<double> r;
+  Residuals(level, table_from_object, threads, &r);
+  const std::size_t n1 = level.reference_points.size(), n2 = level.pass_points.size();
+  const std::size_t m1 = level.reference.size(), m2 = level.pass.size();
+  std::size_t inconsistent = 0;
+  for (std::size_t i = 0; i < n1; ++i)
+    for (std::size_t j = 0; j < m2; ++j)
+      if (r[i * m2 + j] > distance_m) {
+        ++inconsistent;
+        break;
+      }
+  for (std::size_t k = 0; k < n2; ++k)
+    for (std::size_t j = 0; j < m1; ++j)
+      if (r[n1 * m2 + k * m1 + j] > distance_m) {
+        ++inconsistent;
+        break;
+      }
+  return static_cast<double>(inconsistent) / static_cast<double>(std::max<std::size_t>(1, n1 + n2));
+}
+
 // The pose moved by delta: a rotation (angle-axis, first three) about `centre` (in the
 // table frame) and a translation (last three).
 Rigid3d Moved(const Rigid3d& pose, const Eigen::Matrix<double, 6, 1>& delta,
               const Eigen::Vector3d& centre) {
   const Eigen::Vector3d omega = delta.head<3>();
   const double angle = omega.norm();
-  const Eigen::Matrix3d turn =
-      angle > 0 ? Eigen::AngleAxisd(angle, omega / angle).toRotationMatrix()
-                : Eigen::Matrix3d::Identity();
+  const Eigen::Matrix3d turn = angle > 0
+                                   ? Eigen::AngleAxisd(angle, omega / angle).toRotationMatrix()
+                                   : Eigen::Matrix3d::Identity();
   Rigid3d moved;
   moved.rotation = turn * pose.rotation;
   moved.translation = turn * (pose.translation - centre) + centre + delta.tail<3>();
@@ -261,8 +286,9 @@ std::vector<Eigen::Matrix3d> SampleRotations(int count) {
   while (static_cast<int>(rotations.size()) < count) {
     const double u1 = uniform(random), u2 = uniform(random), u3 = uniform(random);
     const double a = std::sqrt(1 - u1), b = std::sqrt(u1);
-    const Eigen::Quaterniond q(b * std::cos(2 * std::numbers::pi * u3), a * std::sin(2 * std::numbers::pi * u2),
-                               a * std::cos(2 * std::numbers::pi * u2), b * std::sin(2 * std::numbers::pi * u3));
+    const Eigen::Quaterniond q(
+        b * std::cos(2 * std::numbers::pi * u3), a * std::sin(2 * std::numbers::pi * u2),
+        a * std::cos(2 * std::numbers::pi * u2), b * std::sin(2 * std::numbers::pi * u3));
     rotations.push_back(q.normalized().toRotationMatrix());
   }
   return rotations;
@@ -291,8 +317,7 @@ std::vector<Eigen::Vector3d> HullPoints(const std::vector<View>& views, int thre
 Level MakeLevel(const std::vector<View>& reference, const std::vector<View>& pass,
                 const std::vector<Eigen::Vector3d>& reference_points,
                 const std::vector<Eigen::Vector3d>& pass_points, std::size_t max_views,
-                int max_side, std::size_t points, double truncation_m, double size_m,
-                int threads) {
+                int max_side, std::size_t points, double truncation_m, double size_m, int threads) {
   Level level;
   const std::vector<std::size_t> r = Spread(reference.size(), max_views);
   const std::vector<std::size_t> p = Spread(pass.size(), max_views);
@@ -329,7 +354,8 @@ Eigen::Vector3d Centroid(const std::vector<Eigen::Vector3d>& points) {
 
 // The poses, best first, keeping only those at least `min_deg` from every better one.
 std::vector<Pose> Distinct(std::vector<Pose> poses, double min_deg, std::size_t count) {
-  std::sort(poses.begin(), poses.end(), [](const Pose& a, const Pose& b) { return a.cost < b.cost; });
+  std::sort(poses.begin(), poses.end(),
+            [](const Pose& a, const Pose& b) { return a.cost < b.cost; });
   std::vector<Pose> kept;
   for (const Pose& pose : poses) {
     if (kept.size() >= count) break;
@@ -377,14 +403,20 @@ const OptionTable<RegistrationOptions>& RegistrationOptions::Fields() {
            .min = 1,
            .min_exclusive = true,
            .advanced = true});
-    t.Add(&O::max_residual,
+    t.Add(&O::max_residual_px,
           {.name = "max-registration-residual",
-           .help = "a pass whose best pose leaves a larger RMS residual (fraction of the "
-                   "product's size) does not show the same product",
+           .help = "a pass whose best pose leaves a larger RMS residual does not show the same "
+                   "product",
+           .unit = "px",
+           .min = 0,
+           .min_exclusive = true,
+           .advanced = true});
+    t.Add(&O::max_inconsistent,
+          {.name = "max-inconsistent",
+           .help = "a pass whose best pose leaves more of the hulls' points outside the other "
+                   "pass's silhouettes does not show the same product",
            .min = 0,
            .max = 1,
-           .min_exclusive = true,
-           .max_exclusive = true,
            .advanced = true});
     t.Add(&O::points, {.name = "registration-points",
                        .help = "surface points per hull at the finest level",
@@ -455,10 +487,9 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
                        threads, progress);
   }
   candidates = Distinct(candidates, options.distinct_deg, 3);
-  const Level fine = MakeLevel(reference, pass, reference_points, pass_points,
-                               std::numeric_limits<std::size_t>::max(), options.max_side_px,
-                               static_cast<std::size_t>(options.points), 0.012 * size, size,
-                               threads);
+  const Level fine = MakeLevel(
+      reference, pass, reference_points, pass_points, std::numeric_limits<std::size_t>::max(),
+      options.max_side_px, static_cast<std::size_t>(options.points), 0.012 * size, size, threads);
   // At the finest level the truncation narrows from 8 to 1.5 pixels: what a hull has too
   // much (the underside its pass did not see) lies further out than that at the right pose,
   // and stops pulling once it is cut off.
@@ -466,8 +497,8 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
     for (const double pixels : {8.0, 3.0, 1.5}) {
       Level narrowed = fine;
       narrowed.truncation_m = std::min(fine.truncation_m, pixels * fine.pixel_m);
-      candidate = Refine(narrowed, Evaluate(narrowed, candidate.table_from_object, threads), c1,
-                         12, threads, progress);
+      candidate = Refine(narrowed, Evaluate(narrowed, candidate.table_from_object, threads), c1, 12,
+                         threads, progress);
     }
     candidate = Evaluate(fine, candidate.table_from_object, threads);
   }
@@ -491,7 +522,14 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
   // In full-size pixels: the level's pixel at the product, over its scale.
   const double full_pixel_m = fine.pixel_m * (fine.pass.empty() ? 1.0 : fine.pass.front().factor);
   result.residual_px = best.rms / std::max(1e-12, full_pixel_m);
-  result.matches = best.rms <= options.max_residual * size;
+  {
+    Level untruncated = fine;
+    untruncated.truncation_m = size;
+    result.inconsistent_fraction =
+        InconsistentFraction(untruncated, best.table_from_object, 3.0 * fine.pixel_m, threads);
+  }
+  result.matches = result.residual_px <= options.max_residual_px &&
+                   result.inconsistent_fraction <= options.max_inconsistent;
   for (std::size_t k = 1; k < candidates.size(); ++k) {
     const double deg = RotationDistanceDeg(best.table_from_object.rotation,
                                            candidates[k].table_from_object.rotation);

@@ -184,6 +184,10 @@ CaptureResult CaptureSession(const std::filesystem::path& folder, Session& sessi
   int moving_to = -1;  // the stop the table was last sent to
   int placed = -1;     // the board placement in place
   int laid = -1;       // the product's pass in place (-1: as the session found it)
+  // A resume that retakes photos of an earlier pass after a later one was begun asks for the
+  // product to be turned back first.
+  const bool later_pass_begun = std::any_of(
+      recorded.begin(), recorded.end(), [](const auto& entry) { return entry.second.pass > 0; });
   for (int stop = 0; stop < total_stops; ++stop) {
     progress.CheckCancelled();
     const double angle = angle_of(stop);
@@ -229,8 +233,9 @@ CaptureResult CaptureSession(const std::filesystem::path& folder, Session& sessi
       rig.place_board(placed);
     }
     // A later pass: the product is laid down another way before its first photo (after a
-    // resume, again before the first photo it still lacks: the operator confirms it lies so).
-    if (rig.turn_product && pass != laid && (pass > 0 || laid >= 0)) {
+    // resume, again before the first photo it still lacks: the operator confirms it lies so;
+    // back as in the first pass when a photo of that is to be retaken).
+    if (rig.turn_product && pass != laid && (pass > 0 || laid >= 0 || later_pass_begun)) {
       laid = pass;
       CAROUSEL_LOG_INFO("pass " << pass + 1 << " of " << passes << ": the product "
                                 << session.passes[static_cast<std::size_t>(pass)].orientation);

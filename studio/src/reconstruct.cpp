@@ -183,11 +183,13 @@ recon::SilhouettesResult FindSilhouettes(const std::filesystem::path& folder,
 }
 
 // FindSilhouettes for each pass on its own (each in its own turntable frame: the plate is
-// removed and the views checked against each other there).
+// removed and the views checked against each other there). A later pass whose silhouettes
+// cannot be found (out of frame, ...) is named in `failed` with the reason, its masks left
+// empty: the first pass's model is made all the same.
 recon::SilhouettesResult FindSilhouettesPerPass(
     const std::filesystem::path& folder, const Session& session, const std::vector<View>& views,
     const std::vector<cv::Mat>& backgrounds, const std::vector<View>& mask_shots,
-    const ReconstructOptions& options, Progress& progress) {
+    const ReconstructOptions& options, Progress& progress, std::map<int, std::string>* failed) {
   if (!HasSeveralPasses(session))
     return FindSilhouettes(folder, session, views, backgrounds, mask_shots, options, progress);
   recon::SilhouettesResult result;
@@ -209,8 +211,17 @@ recon::SilhouettesResult FindSilhouettesPerPass(
       if (!mask_shots.empty()) sub_shots.push_back(mask_shots[i]);
       if (!backgrounds.empty()) sub_backgrounds.push_back(backgrounds[i]);
     }
-    const recon::SilhouettesResult found =
-        FindSilhouettes(folder, sub, sub_views, sub_backgrounds, sub_shots, options, progress);
+    recon::SilhouettesResult found;
+    try {
+      found =
+          FindSilhouettes(folder, sub, sub_views, sub_backgrounds, sub_shots, options, progress);
+    } catch (const Cancelled&) {
+      throw;
+    } catch (const Error& e) {
+      if (pass == 0) throw;
+      (*failed)[pass] = e.what();
+      continue;
+    }
     for (std::size_t k = 0; k < which.size(); ++k) {
       result.masks[which[k]] = found.masks[k];
       result.stats[which[k]] = found.stats[k];
@@ -241,8 +252,9 @@ std::string Millimetres(double metres) {
 // object frame. Returns the outcomes; a pass that is not registered (out of frame, another
 // product, an ambiguous pose) is named with the reason and left out of the model.
 std::vector<PassOutcome> RegisterPasses(const Session& session_in, Session& session,
-                                        std::vector<View>& views, const ReconstructOptions& options,
-                                        Progress& progress) {
+                                        std::vector<View>& views,
+                                        const std::map<int, std::string>& silhouettes_failed,
+                                        const ReconstructOptions& options, Progress& progress) {
   std::vector<PassOutcome> outcomes;
   const int passes = session_in.views.back().pass + 1;
   std::vector<View> reference;
@@ -262,13 +274,17 @@ std::vector<PassOutcome> RegisterPasses(const Session& session_in, Session& sess
     int out_of_frame = 0;
     std::string first_out;
     for (const std::size_t i : which) {
+      if (silhouettes_failed.contains(pass)) break;
       moved.push_back(views[i]);
       if (TouchesEdge(views[i].Mask())) {
         if (out_of_frame++ == 0) first_out = views[i].name();
       }
     }
     record.table_from_object.reset();
-    if (which.size() < 2) {
+    if (const auto it = silhouettes_failed.find(pass); it != silhouettes_failed.end()) {
+      outcome.status = "failed";
+      outcome.note = name + ": its silhouettes cannot be found: " + it->second;
+    } else if (which.size() < 2) {
       outcome.status = "failed";
       outcome.note = name + " has " + std::to_string(which.size()) + " view(s); it needs 2 or more";
     } else if (out_of_frame > options.max_out_of_frame * static_cast<double>(which.size())) {
@@ -286,16 +302,18 @@ std::vector<PassOutcome> RegisterPasses(const Session& session_in, Session& sess
         outcome.registration = found;
         std::ostringstream note;
         note << name << ": residual " << std::fixed << std::setprecision(2) << found.residual_px
-             << " px (" << Millimetres(found.residual_m) << ")";
+             << " px (" << Millimetres(found.residual_m) << "), " << std::setprecision(0)
+             << 100.0 * found.inconsistent_fraction
+             << "% of the hulls' points outside the other pass's silhouettes";
         if (found.runner_up)
           note << ", the next pose " << std::setprecision(1) << found.runner_up_deg
                << " deg away fits " << std::setprecision(2) << found.runner_up_ratio
                << " times worse";
         if (!found.matches) {
           outcome.status = "failed";
-          outcome.note = note.str() + ": its silhouettes do not fit pass 1's at any pose (over " +
-                         Millimetres(options.registration.max_residual * found.size_m) +
-                         "), so it does not show the same product";
+          outcome.note = note.str() +
+                         ": its silhouettes do not fit pass 1's at any pose, so it "
+                         "does not show the same product";
         } else if (found.ambiguous) {
           outcome.status = "ambiguous";
           outcome.note = note.str() +
@@ -419,8 +437,10 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
   std::vector<cv::Mat> backgrounds;
   if (options.silhouettes.method == recon::SilhouetteMethod::kDifference)
     backgrounds = LoadBackgrounds(session_folder, session);
-  const recon::SilhouettesResult silhouettes = FindSilhouettesPerPass(
-      session_folder, session, views, backgrounds, mask_shots, options, progress);
+  std::map<int, std::string> silhouettes_failed;
+  const recon::SilhouettesResult silhouettes =
+      FindSilhouettesPerPass(session_folder, session, views, backgrounds, mask_shots, options,
+                             progress, &silhouettes_failed);
   result.given_masks =
       static_cast<int>(std::count_if(silhouettes.stats.begin(), silhouettes.stats.end(),
                                      [](const recon::SilhouetteStats& s) { return s.given; }));
@@ -431,12 +451,18 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
   // masks compress well at the fastest level.
   ParallelFor(views.size(), 1, options.hull.threads, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
+      if (silhouettes.masks[i].empty()) continue;  // a later pass that failed
       const std::string mask =
           "masks/" + std::filesystem::path(session.views[i].image).stem().string() + ".png";
       WriteImage(session_folder / mask, silhouettes.masks[i], {.png_compression = 1});
     }
   });
   for (std::size_t i = 0; i < views.size(); ++i) {
+    if (silhouettes.masks[i].empty()) {
+      session.views[i].mask.clear();
+      session.views[i].mask_sha256.clear();
+      continue;
+    }
     const std::string mask =
         "masks/" + std::filesystem::path(session.views[i].image).stem().string() + ".png";
     session.views[i].mask = mask;
@@ -455,7 +481,7 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
   if (HasSeveralPasses(session)) {
     watch.Restart();
     const Session before = session;
-    result.passes = RegisterPasses(before, session, views, options, progress);
+    result.passes = RegisterPasses(before, session, views, silhouettes_failed, options, progress);
     std::size_t used = 0;
     while (used < views.size() &&
            (session.views[used].pass == 0 ||

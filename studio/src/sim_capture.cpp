@@ -253,6 +253,11 @@ const OptionTable<SimCaptureOptions>& SimCaptureOptions::Fields() {
         });
     t.Add(&O::pose_seed,
           {.name = "pose-seed", .help = "seed of the random second pose", .advanced = true});
+    t.Add(&O::second_offset_m, {.name = "second-offset",
+                                .help = "how far off the plate's centre the product lies in the "
+                                        "second pass",
+                                .unit = "m",
+                                .advanced = true});
     t.Add(&O::eval_below,
           {.name = "eval-below",
            .help = "evaluation photos from below the product (ground truth only, never used)",
@@ -304,7 +309,7 @@ sim::Scene LaidDownScene(const sim::Scene& scene, const SimCaptureOptions& optio
   sim::Scene turned = scene;
   turned.Transform(Rigid3d(turn.rotation, Eigen::Vector3d::Zero()));
   const Eigen::AlignedBox3d box = turned.Bounds();
-  const Eigen::Vector3d offset(turn.translation.x() - box.center().x(),
+  const Eigen::Vector3d offset(turn.translation.x() + options.second_offset_m - box.center().x(),
                                turn.translation.y() - box.center().y(), -box.min().z());
   turned.Transform(Rigid3d(Eigen::Matrix3d::Identity(), offset));
   *table_from_object = Rigid3d(turn.rotation, offset);

@@ -42,8 +42,12 @@ struct RegistrationOptions {
   // ambiguous, > 1.
   double ambiguity_ratio = 1.25;
   // The passes do not show the same product when the best pose's RMS residual exceeds this
-  // fraction of the product's size (the diagonal of its box), (0, 1).
-  double max_residual = 0.004;
+  // many pixels of the photos (what the silhouettes can tell apart), > 0.
+  double max_residual_px = 2.0;
+  // ... or when more than this fraction of the hulls' surface points lie over 3 pixels
+  // outside some silhouette of the other pass (what a pass did not see lies outside too:
+  // a product's own passes leave ~5-15 %), 0..1.
+  double max_inconsistent = 0.25;
   // Surface points per hull at the finest level, 100..100000.
   int points = 4000;
   // The finest level's masks: longest side at most this, pixels, 256..20000.
@@ -62,7 +66,10 @@ struct RegistrationResult {
   double residual_m = 0.0;
   double residual_px = 0.0;
   double size_m = 0.0;  // the reference hull's box diagonal
-  // Whether the best pose's residual is within max_residual of the size.
+  // The fraction of the hulls' surface points over 3 pixels outside some silhouette of the
+  // other pass at the best pose.
+  double inconsistent_fraction = 0.0;
+  // Whether the best pose's residual is within max_residual_px.
   bool matches = false;
   // A distinct pose (>= distinct_deg away) nearly as good: the pose is not determined.
   bool ambiguous = false;

@@ -65,6 +65,9 @@ struct SimCaptureOptions {
   int orientations = 1;
   std::string second_pose = "side";
   std::uint64_t pose_seed = 1;
+  // How far off the plate's centre (along +x) the product lies in the second pass, metres:
+  // laid down carelessly, out of the frame.
+  double second_offset_m = 0.0;
   // Photos for evaluation only (ground_truth/eval/, never read by the pipeline): this many
   // from below the product (elevation -30 deg in the object frame, evenly round it), rendered
   // without the plate, the product lit as in the last pass.
