@@ -100,7 +100,8 @@ ModelFigures ScoreModel(const std::filesystem::path& folder, bool gain, Progress
     below.push_back(texture::ScoreHeldOutView(model, view, static_cast<int>(below.size()),
                                               ReadMask(folder / eval.mask)));
     // Beside the photo, for a look: the model from there.
-    const texture::ModelRendering rendering = texture::RenderTexturedModel(model, eval.camera_model);
+    const texture::ModelRendering rendering =
+        texture::RenderTexturedModel(model, eval.camera_model);
     cv::Mat pair;
     cv::hconcat(view.Image(), rendering.image, pair);
     WriteImage(folder / (std::filesystem::path(eval.image).stem().string() + "_vs_model.png"), pair,
@@ -206,10 +207,12 @@ int main(int argc, char** argv) {
     times.push_back(seconds);
     std::printf(
         "%s %s seed %d: %s, rotation error %.3f deg, surface moved %.3f mm, residual %.2f px "
-        "(%.3f mm), runner-up %.2fx at %.1f deg; %.2f s (hulls %.2f, search %.2f, refine %.2f)\n",
+        "(%.3f mm), %.1f%% inconsistent, runner-up %.2fx at %.1f deg; %.2f s (hulls %.2f, search "
+        "%.2f, refine %.2f)\n",
         scene.c_str(), pose.c_str(), seed, status.c_str(), rotation_deg, displacement_mm,
-        found.residual_px, 1e3 * found.residual_m, found.runner_up_ratio, found.runner_up_deg,
-        seconds, found.seconds_hulls, found.seconds_search, found.seconds_refine);
+        found.residual_px, 1e3 * found.residual_m, 100.0 * found.inconsistent_fraction,
+        found.runner_up_ratio, found.runner_up_deg, seconds, found.seconds_hulls,
+        found.seconds_search, found.seconds_refine);
     std::fflush(stdout);
     if (model && status == "registered") {
       const double truth_volume = SignedVolume(truth);
@@ -217,8 +220,9 @@ int main(int argc, char** argv) {
       studio::ReconstructSession(one, studio::ReconstructOptions(), progress);
       const ModelFigures single = ScoreModel(one, !no_gain, progress);
       const ModelFigures both = ScoreModel(folder, !no_gain, progress);
-      for (const auto& [name, f] : {std::pair<const char*, const ModelFigures&>{"one pass", single},
-                                    std::pair<const char*, const ModelFigures&>{"two passes", both}}) {
+      for (const auto& [name, f] :
+           {std::pair<const char*, const ModelFigures&>{"one pass", single},
+            std::pair<const char*, const ModelFigures&>{"two passes", both}}) {
         std::printf(
             "  %s: hull volume %.1f cm3 (%+.1f%% vs the true mesh's %.1f cm3), %d of %zu faces "
             "(%.2f%%) seen by no view, held-out side views %.2f dB, views from below %.2f dB\n",

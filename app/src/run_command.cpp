@@ -39,8 +39,9 @@ void AskForBoardPlacement(int index, int placements, std::ostream& err) {
 // Hardware product passes: the operator lays the product down another way; Enter continues.
 void AskToTurnProduct(int pass, int passes, std::ostream& err) {
   err << "\npass " << pass + 1 << " of " << passes
-      << ": lay the product down another way (on its side, upside down), near the plate's "
-         "centre"
+      << (pass == 0 ? ": stand the product as it stood in the first pass"
+                    : ": lay the product down another way (on its side, upside down), near the "
+                      "plate's centre")
       << (::isatty(STDIN_FILENO) ? ", then press Enter" : "") << std::endl;
   if (::isatty(STDIN_FILENO)) {
     std::string line;

@@ -132,10 +132,12 @@ void StudioApp::DrawSessionPanel(const JobStatus& job, float) {
     }
   }
   if (job.board_prompt && job.board_prompt->product) {
-    ImGui::TextColored(kGreen,
-                       "Pass %d of %d: lay the product down another way (on its side, upside "
-                       "down), near the plate's centre",
-                       job.board_prompt->index + 1, job.board_prompt->placements);
+    ImGui::TextColored(kGreen, "Pass %d of %d: %s", job.board_prompt->index + 1,
+                       job.board_prompt->placements,
+                       job.board_prompt->index == 0
+                           ? "stand the product as it stood in the first pass"
+                           : "lay the product down another way (on its side, upside down), "
+                             "near the plate's centre");
     if (ImGui::Button("The product lies so", ImVec2(-1.0f, 0.0f))) controller_.ConfirmBoardPlaced();
   } else if (job.board_prompt) {
     ImGui::TextColored(kGreen, "Board placement %d of %d: stand the board on the turntable",

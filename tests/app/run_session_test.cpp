@@ -360,6 +360,69 @@ TEST(RunSessionTest, ResumeRetakesMissingAndDamagedPhotosAndKeepsTheDamagedCopy)
   EXPECT_EQ(Wait(Spawn(RunArgs(dir.path()))), kExitIoError);
 }
 
+// Two orientations on the simulated rig (it lays the product down itself between the passes):
+// the second pass's photos are tagged and registered; a resume that has to retake the last
+// photo of the first pass and the first of the second stands the product back up, lays it
+// down again, and keeps every other photo byte for byte.
+TEST(RunSessionTest, TwoOrientationsAreRegisteredAndResumedAcrossThePassBoundary) {
+  TempDir dir;
+  std::vector<std::string> args = {"run",
+                                   "--sim",
+                                   "--product",
+                                   "two-passes",
+                                   "--out",
+                                   dir.path().string(),
+                                   "--data",
+                                   testing::SharedDataDir().string(),
+                                   "--size",
+                                   "480x320",
+                                   "--views",
+                                   "8",
+                                   "--orientations",
+                                   "2",
+                                   "--backdrop",
+                                   "grey",
+                                   "--no-publish"};
+  ASSERT_EQ(Wait(Spawn(args)), 0);
+  const auto session = dir.path() / "two-passes";
+  const Session first = ReadSession(session);
+  ASSERT_EQ(first.views.size(), 16u);
+  ASSERT_EQ(first.passes.size(), 2u);
+  EXPECT_EQ(first.passes[1].orientation, "side");
+  EXPECT_EQ(first.passes[1].registration, "registered") << first.passes[1].registration_note;
+  EXPECT_EQ(first.views[8].image, "images/pass1_cam0_stop00.jpg");
+  EXPECT_EQ(first.views[8].pass, 1);
+  const auto before = Recorded(session);
+  std::map<std::string, cv::Mat> originals;
+  for (const char* image : {"cam0_stop07.jpg", "pass1_cam0_stop00.jpg"}) {
+    originals[image] = cv::imread((session / "images" / image).string());
+    std::filesystem::remove(session / "images" / image);
+  }
+  Progress progress;
+  const RunResult result = ResumeSession(session, progress);
+  EXPECT_EQ(result.photos_taken, 2);
+  EXPECT_EQ(result.photos_kept, 14);
+  EXPECT_TRUE(result.reconstructed);
+  const Session after = ReadSession(session);
+  ASSERT_EQ(after.views.size(), 16u);
+  for (std::size_t i = 0; i < after.views.size(); ++i) {
+    EXPECT_EQ(after.views[i].pass, i < 8 ? 0 : 1) << after.views[i].image;
+    const std::string& image = after.views[i].image;
+    if (image == "images/cam0_stop07.jpg" || image == "images/pass1_cam0_stop00.jpg") continue;
+    EXPECT_EQ(before.at(image), after.views[i].sha256) << image;
+  }
+  EXPECT_EQ(after.passes[1].registration, "registered") << after.passes[1].registration_note;
+  // The retaken photos show the product as their pass laid it: the same photos again but for
+  // the sensor noise (upright instead of on its side, or the other way, differs by far more).
+  for (const auto& [image, original] : originals) {
+    const cv::Mat retaken = cv::imread((session / "images" / image).string());
+    ASSERT_EQ(retaken.size(), original.size()) << image;
+    cv::Mat difference;
+    cv::absdiff(retaken, original, difference);
+    EXPECT_LT(cv::mean(difference)[0], 3.0) << image;
+  }
+}
+
 // Backlit mask shots: one beside every photo, with its own checksum; the silhouettes come from
 // them. A resume retakes exactly what is missing or damaged: a mask shot alone when only it is,
 // both shots of a view whose photo is lost; everything else stays byte for byte.

@@ -1,0 +1,141 @@
+// Registration of a second pass (recon/registration.h) on rendered passes of synthetic
+// products: the simulator's truth is known exactly.
+#include "carousel/recon/registration.h"
+
+#include <cstdio>
+#include <numbers>
+
+#include <gtest/gtest.h>
+
+#include "carousel/sim/renderer.h"
+#include "carousel/sim/scene.h"
+#include "carousel/sim/sim_rig.h"
+#include "carousel/sim/test_scenes.h"
+#include "carousel/testing/testing.h"
+
+namespace carousel::recon {
+namespace {
+
+struct TwoPasses {
+  std::vector<View> first, second;
+  Rigid3d truth;         // the second pass's table frame from the object frame
+  double pixel_m = 0.0;  // a pixel at the product
+};
+
+// The product as placed (object frame) and laid down (turned by `turn`, set on the plate
+// `offset_x` off its centre), photographed at `stops` stops by one camera 20 deg up.
+TwoPasses RenderTwoPasses(const sim::Scene& product, const sim::Scene& second_product,
+                          const Eigen::Matrix3d& turn, double offset_x, int stops) {
+  sim::SimRigOptions rig_options;
+  rig_options.elevations_deg = {20.0};
+  rig_options.width = 480;
+  rig_options.height = 320;
+  const CameraModel at_zero = sim::MakeSimRig(rig_options, product.Bounds()).front();
+  sim::Scene laid = second_product;
+  laid.Transform(Rigid3d(turn, Eigen::Vector3d::Zero()));
+  const Eigen::AlignedBox3d box = laid.Bounds();
+  const Eigen::Vector3d offset(offset_x - box.center().x(), -box.center().y(), -box.min().z());
+  laid.Transform(Rigid3d(Eigen::Matrix3d::Identity(), offset));
+  TwoPasses passes;
+  passes.truth = Rigid3d(turn, offset);
+  passes.pixel_m = (at_zero.Centre() - product.Bounds().center()).norm() / at_zero.fx;
+  sim::RenderOptions render;
+  render.noise_sigma = 1.0;
+  for (int pass = 0; pass < 2; ++pass) {
+    for (int stop = 0; stop < stops; ++stop) {
+      const double angle = 2.0 * std::numbers::pi * stop / stops;
+      const CameraModel camera = sim::CameraAtTableAngle(at_zero, angle);
+      const sim::RenderResult rendered = sim::Render(pass == 0 ? product : laid, camera, angle, render);
+      View view(camera, {});
+      view.SetImage(rendered.image);
+      view.SetMask(rendered.mask);
+      view.set_name("pass" + std::to_string(pass) + "_stop" + std::to_string(stop));
+      (pass == 0 ? passes.first : passes.second).push_back(std::move(view));
+    }
+  }
+  return passes;
+}
+
+sim::Scene Mug() {
+  sim::Scene mug = sim::MakeMugScene(0.15);
+  sim::PlaceOnTurntable(mug, {});
+  return mug;
+}
+
+// The largest displacement of the product's box corners between two poses.
+double CornerDisplacement(const Eigen::AlignedBox3d& box, const Rigid3d& a, const Rigid3d& b) {
+  double worst = 0.0;
+  for (int corner = 0; corner < 8; ++corner) {
+    const Eigen::Vector3d p = box.corner(static_cast<Eigen::AlignedBox3d::CornerType>(corner));
+    worst = std::max(worst, (a * p - b * p).norm());
+  }
+  return worst;
+}
+
+sim::Scene Shoe() {
+  sim::Scene shoe = sim::LoadScene(
+      carousel::testing::SharedDataFile("models/MaterialsVariantsShoe/glTF/MaterialsVariantsShoe.gltf"));
+  sim::PlaceOnTurntable(shoe, {});
+  return shoe;
+}
+
+TEST(RegistrationTest, FindsTheShoeLaidOnItsSide) {
+  const sim::Scene shoe = Shoe();
+  // On its side, 2 cm off the plate's centre.
+  const Eigen::Matrix3d turn =
+      Eigen::AngleAxisd(0.5 * std::numbers::pi, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  const TwoPasses passes = RenderTwoPasses(shoe, shoe, turn, 0.02, 10);
+  Progress progress;
+  const RegistrationResult found = RegisterPass(passes.first, passes.second, {}, progress);
+  EXPECT_TRUE(found.matches);
+  EXPECT_FALSE(found.ambiguous) << "runner-up " << found.runner_up_ratio << "x at "
+                                << found.runner_up_deg << " deg";
+  EXPECT_LT(RotationDistanceDeg(found.table_from_object.rotation, passes.truth.rotation), 0.5);
+  // Within a pixel at the product, over the whole box.
+  EXPECT_LT(CornerDisplacement(shoe.Bounds(), found.table_from_object, passes.truth),
+            1.0 * passes.pixel_m);
+  std::printf("the shoe on its side: residual %.2f px, %.1f%% inconsistent, runner-up %.2fx\n",
+              found.residual_px, 100.0 * found.inconsistent_fraction, found.runner_up_ratio);
+  EXPECT_LT(found.inconsistent_fraction, 0.2);
+  EXPECT_LT(found.residual_px, 1.5);
+  EXPECT_GT(found.runner_up_ratio, 1.5);
+}
+
+TEST(RegistrationTest, ReportsASymmetricProductAsAmbiguous) {
+  // A mug on its side: its open top and closed bottom have the same outline, so the pose and
+  // the pose turned end over end (the handle staying where it is) fit alike.
+  const sim::Scene mug = Mug();
+  const Eigen::Matrix3d turn =
+      Eigen::AngleAxisd(0.5 * std::numbers::pi, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  const TwoPasses passes = RenderTwoPasses(mug, mug, turn, 0.02, 8);
+  Progress progress;
+  const RegistrationResult found = RegisterPass(passes.first, passes.second, {}, progress);
+  EXPECT_TRUE(found.matches);
+  EXPECT_TRUE(found.ambiguous);
+  EXPECT_LT(found.runner_up_ratio, 1.25);
+  EXPECT_GE(found.runner_up_deg, 10.0);
+}
+
+TEST(RegistrationTest, AnotherProductDoesNotMatch) {
+  const sim::Scene mug = Mug();
+  sim::Scene ring = sim::MakeRingScene(0.06, 0.02);
+  sim::PlaceOnTurntable(ring, {});
+  const TwoPasses passes = RenderTwoPasses(mug, ring, Eigen::Matrix3d::Identity(), 0.0, 8);
+  Progress progress;
+  const RegistrationResult found = RegisterPass(passes.first, passes.second, {}, progress);
+  std::printf("a ring registered to a mug: residual %.2f px, %.1f%% inconsistent\n",
+              found.residual_px, 100.0 * found.inconsistent_fraction);
+  EXPECT_FALSE(found.matches) << "residual " << found.residual_px << " px";
+}
+
+TEST(RegistrationTest, RefusesTooFewViewsAndBadOptions) {
+  const std::vector<View> none;
+  Progress progress;
+  EXPECT_THROW(RegisterPass(none, none, {}, progress), InvalidArgument);
+  RegistrationOptions options;
+  options.rotations = 10;
+  EXPECT_THROW(options.Validate(), InvalidArgument);
+}
+
+}  // namespace
+}  // namespace carousel::recon
