@@ -87,10 +87,23 @@ void StudioApp::DrawJobMessage(const JobStatus& job) {
       ImGui::Text("%s: %s, %s", job.product.c_str(), job.cancelling ? "cancelling" : "running",
                   Duration(job.seconds).c_str());
       break;
-    case JobState::kSucceeded:
+    case JobState::kSucceeded: {
       ImGui::TextColored(kGreen, "%s: done in %s", job.product.c_str(),
                          Duration(job.seconds).c_str());
+      // The later passes (the product laid down another way): registered, or left out and why.
+      const std::optional<studio::ReconstructResult>& reconstructed =
+          job.run       ? job.run->reconstruct
+          : job.process ? job.process->reconstruct
+                        : std::optional<studio::ReconstructResult>();
+      if (reconstructed) {
+        ImGui::PushTextWrapPos(0.0f);
+        for (const studio::PassOutcome& pass : reconstructed->passes)
+          ImGui::TextColored(pass.status == "registered" ? kGreen : kRed, "%s%s",
+                             pass.status == "registered" ? "" : "not used: ", pass.note.c_str());
+        ImGui::PopTextWrapPos();
+      }
       break;
+    }
     case JobState::kFailed:
       ImGui::PushTextWrapPos(0.0f);
       ImGui::TextColored(kRed, "%s failed: %s", job.product.c_str(), job.error.c_str());

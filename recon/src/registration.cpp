@@ -294,9 +294,28 @@ std::vector<Eigen::Matrix3d> SampleRotations(int count) {
   return rotations;
 }
 
-// Surface points of the pass's own visual hull (its own table frame), on a coarse grid.
-std::vector<Eigen::Vector3d> HullPoints(const std::vector<View>& views, int threads,
-                                        Progress& progress, Eigen::AlignedBox3d* box) {
+// Surface points of the pass's own visual hull (its own table frame), on a coarse grid, from
+// the masks scaled to at most `max_side` pixels (a grid of 96 cells needs no more).
+std::vector<Eigen::Vector3d> HullPoints(const std::vector<View>& full_size, int max_side,
+                                        int threads, Progress& progress, Eigen::AlignedBox3d* box) {
+  std::vector<View> views(full_size.size());
+  ParallelFor(views.size(), 1, threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      const cv::Mat mask = full_size[i].Mask();
+      const double factor =
+          std::min(1.0, static_cast<double>(max_side) / std::max(mask.cols, mask.rows));
+      if (factor >= 1.0) {
+        views[i] = full_size[i];
+        continue;
+      }
+      const CameraModel camera = full_size[i].camera().Scaled(factor);
+      cv::Mat small;
+      cv::resize(mask, small, cv::Size(camera.width, camera.height), 0, 0, cv::INTER_AREA);
+      views[i] = View(camera, {});
+      views[i].SetMask(small);
+      views[i].set_name(full_size[i].name());
+    }
+  });
   VisualHullOptions options;
   options.resolution = 96;
   options.proxy_max_faces = 0;
@@ -403,14 +422,6 @@ const OptionTable<RegistrationOptions>& RegistrationOptions::Fields() {
            .min = 1,
            .min_exclusive = true,
            .advanced = true});
-    t.Add(&O::max_residual_px,
-          {.name = "max-registration-residual",
-           .help = "a pass whose best pose leaves a larger RMS residual does not show the same "
-                   "product",
-           .unit = "px",
-           .min = 0,
-           .min_exclusive = true,
-           .advanced = true});
     t.Add(&O::max_inconsistent,
           {.name = "max-inconsistent",
            .help = "a pass whose best pose leaves more of the hulls' points outside the other "
@@ -449,8 +460,9 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
   Stopwatch watch;
   Eigen::AlignedBox3d reference_box, pass_box;
   const std::vector<Eigen::Vector3d> reference_points =
-      HullPoints(reference, threads, progress, &reference_box);
-  const std::vector<Eigen::Vector3d> pass_points = HullPoints(pass, threads, progress, &pass_box);
+      HullPoints(reference, options.max_side_px, threads, progress, &reference_box);
+  const std::vector<Eigen::Vector3d> pass_points =
+      HullPoints(pass, options.max_side_px, threads, progress, &pass_box);
   result.size_m = reference_box.sizes().norm();
   result.points_reference = static_cast<int>(reference_points.size());
   result.points_pass = static_cast<int>(pass_points.size());
@@ -528,8 +540,7 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
     result.inconsistent_fraction =
         InconsistentFraction(untruncated, best.table_from_object, 3.0 * fine.pixel_m, threads);
   }
-  result.matches = result.residual_px <= options.max_residual_px &&
-                   result.inconsistent_fraction <= options.max_inconsistent;
+  result.matches = result.inconsistent_fraction <= options.max_inconsistent;
   for (std::size_t k = 1; k < candidates.size(); ++k) {
     const double deg = RotationDistanceDeg(best.table_from_object.rotation,
                                            candidates[k].table_from_object.rotation);

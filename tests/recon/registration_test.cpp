@@ -45,7 +45,8 @@ TwoPasses RenderTwoPasses(const sim::Scene& product, const sim::Scene& second_pr
     for (int stop = 0; stop < stops; ++stop) {
       const double angle = 2.0 * std::numbers::pi * stop / stops;
       const CameraModel camera = sim::CameraAtTableAngle(at_zero, angle);
-      const sim::RenderResult rendered = sim::Render(pass == 0 ? product : laid, camera, angle, render);
+      const sim::RenderResult rendered =
+          sim::Render(pass == 0 ? product : laid, camera, angle, render);
       View view(camera, {});
       view.SetImage(rendered.image);
       view.SetMask(rendered.mask);
@@ -73,8 +74,8 @@ double CornerDisplacement(const Eigen::AlignedBox3d& box, const Rigid3d& a, cons
 }
 
 sim::Scene Shoe() {
-  sim::Scene shoe = sim::LoadScene(
-      carousel::testing::SharedDataFile("models/MaterialsVariantsShoe/glTF/MaterialsVariantsShoe.gltf"));
+  sim::Scene shoe = sim::LoadScene(carousel::testing::SharedDataFile(
+      "models/MaterialsVariantsShoe/glTF/MaterialsVariantsShoe.gltf"));
   sim::PlaceOnTurntable(shoe, {});
   return shoe;
 }

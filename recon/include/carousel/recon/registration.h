@@ -41,12 +41,10 @@ struct RegistrationOptions {
   // A distinct runner-up whose residual is within this factor of the best's makes the pose
   // ambiguous, > 1.
   double ambiguity_ratio = 1.25;
-  // The passes do not show the same product when the best pose's RMS residual exceeds this
-  // many pixels of the photos (what the silhouettes can tell apart), > 0.
-  double max_residual_px = 2.0;
-  // ... or when more than this fraction of the hulls' surface points lie over 3 pixels
-  // outside some silhouette of the other pass (what a pass did not see lies outside too:
-  // a product's own passes leave ~5-15 %), 0..1.
+  // The passes do not show the same product when, at the best pose, more than this fraction
+  // of the hulls' surface points lie over 3 pixels (of the finest level) outside some
+  // silhouette of the other pass. What a pass did not see lies outside too: a product's own
+  // passes leave 3-16 %, another product 40-50 %. 0..1.
   double max_inconsistent = 0.25;
   // Surface points per hull at the finest level, 100..100000.
   int points = 4000;
@@ -69,7 +67,7 @@ struct RegistrationResult {
   // The fraction of the hulls' surface points over 3 pixels outside some silhouette of the
   // other pass at the best pose.
   double inconsistent_fraction = 0.0;
-  // Whether the best pose's residual is within max_residual_px.
+  // Whether the best pose leaves at most max_inconsistent of the points outside.
   bool matches = false;
   // A distinct pose (>= distinct_deg away) nearly as good: the pose is not determined.
   bool ambiguous = false;
