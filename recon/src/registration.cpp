@@ -365,6 +365,13 @@ Level MakeLevel(const std::vector<View>& reference, const std::vector<View>& pas
   return level;
 }
 
+// The level with its truncation narrowed to `pixels` of its pixels at the product.
+Level Narrowed(const Level& level, double pixels) {
+  Level narrowed = level;
+  narrowed.truncation_m = std::min(level.truncation_m, pixels * level.pixel_m);
+  return narrowed;
+}
+
 Eigen::Vector3d Centroid(const std::vector<Eigen::Vector3d>& points) {
   Eigen::Vector3d sum = Eigen::Vector3d::Zero();
   for (const Eigen::Vector3d& p : points) sum += p;
@@ -507,8 +514,7 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
   // and stops pulling once it is cut off.
   for (Pose& candidate : candidates) {
     for (const double pixels : {8.0, 3.0, 1.5}) {
-      Level narrowed = fine;
-      narrowed.truncation_m = std::min(fine.truncation_m, pixels * fine.pixel_m);
+      const Level narrowed = Narrowed(fine, pixels);
       candidate = Refine(narrowed, Evaluate(narrowed, candidate.table_from_object, threads), c1, 12,
                          threads, progress);
     }
@@ -518,8 +524,7 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
             [](const Pose& a, const Pose& b) { return a.cost < b.cost; });
   // The best: on to the bottom of its flat valley by compass search.
   {
-    Level narrowed = fine;
-    narrowed.truncation_m = std::min(fine.truncation_m, 1.5 * fine.pixel_m);
+    const Level narrowed = Narrowed(fine, 1.5);
     const double radius = 0.5 * size;
     Pose& best = candidates.front();
     best = CompassSearch(narrowed, Evaluate(narrowed, best.table_from_object, threads), c1,
