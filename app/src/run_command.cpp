@@ -68,7 +68,7 @@ int RunOneButton(RunArgs& args, Io& io) {
   }
   CliProgress cli(io.err);
   if (!args.resume.empty()) {
-    result = studio::ResumeSession(args.resume, cli.progress());
+    result = studio::ResumeSession(args.resume, cli.progress(), args.options.turn_product);
   } else {
     CAROUSEL_THROW_IF(args.options.product.empty(), InvalidArgument,
                       "carousel run: --product SKU is required");

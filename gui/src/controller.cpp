@@ -330,10 +330,21 @@ void StudioController::StartResume(const std::filesystem::path& session) {
     throw IoError(session / "run.json",
                   "no run.json: not a session `carousel run` or the window started; use "
                   "Reprocess to build it again from its photos");
+  // A hardware session of several passes asks the operator, in the window, to lay the
+  // product as the pass it resumes in needs.
+  auto turn_product = [this](int pass, int passes) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    status_.board_prompt = BoardPrompt{pass, passes, true};
+    board_confirmed_ = false;
+    status_.stage_changes = ++change_base_ + tracker_.changes();
+    board_placed_.wait(lock, [this] { return board_confirmed_ || token_.IsCancelled(); });
+    status_.board_prompt.reset();
+    if (token_.IsCancelled()) throw Cancelled("laying the product down cancelled");
+  };
   Launch(JobKind::kResume, session.filename().string(), session,
-         [session](Progress& progress, std::optional<studio::RunResult>* run,
-                   std::optional<studio::ProcessResult>*) {
-           *run = studio::ResumeSession(session, progress);
+         [session, turn_product](Progress& progress, std::optional<studio::RunResult>* run,
+                                 std::optional<studio::ProcessResult>*) {
+           *run = studio::ResumeSession(session, progress, turn_product);
          });
 }
 

@@ -219,7 +219,11 @@ HeldOutComparison CompareHeldOutView(const std::filesystem::path& session, int v
       out.ssim = v.value("ssim", 0.0);
     }
   }
-  const CameraModel& camera = sv.camera_model;
+  // In the object frame (a registered later pass's own table frame is not).
+  const std::vector<View> views = studio::SessionViews(session, manifest);
+  CAROUSEL_THROW_IF(view >= static_cast<int>(views.size()), InvalidArgument,
+                    "view " << view << " belongs to a pass the model was not made from");
+  const CameraModel camera = views[static_cast<std::size_t>(view)].camera();
   const double scale =
       std::min(1.0, static_cast<double>(max_side) / std::max(camera.width, camera.height));
   const CameraModel scaled = scale < 1.0 ? camera.Scaled(scale) : camera;

@@ -181,6 +181,7 @@ void PhotoWatcher::Scan(const std::filesystem::path& folder) {
     thumb.stem = stem;
     thumb.camera = view.camera;
     thumb.stop = view.stop;
+    thumb.pass = view.pass;
     thumb.table_angle_deg = view.table_angle_deg;
     const std::filesystem::path image = folder / view.image;
     const std::string bytes = ReadBytes(image);

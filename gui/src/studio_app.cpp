@@ -4,6 +4,7 @@
 #include <cctype>
 #include <cstdio>
 #include <thread>
+#include <tuple>
 
 #include <dlfcn.h>
 #include <link.h>
@@ -422,7 +423,8 @@ void StudioApp::Poll() {
     it->info.mask_rgba.release();
   }
   std::sort(thumbs_.begin(), thumbs_.end(), [](const Thumb& a, const Thumb& b) {
-    return a.info.stop != b.info.stop ? a.info.stop < b.info.stop : a.info.camera < b.info.camera;
+    return std::tie(a.info.pass, a.info.stop, a.info.camera) <
+           std::tie(b.info.pass, b.info.stop, b.info.camera);
   });
 }
 

@@ -522,6 +522,8 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
   }
   std::sort(candidates.begin(), candidates.end(),
             [](const Pose& a, const Pose& b) { return a.cost < b.cost; });
+  // The runner-up is judged against the best as both were refined alike.
+  const double best_refined_rms = candidates.front().rms;
   // The best: on to the bottom of its flat valley by compass search.
   {
     const Level narrowed = Narrowed(fine, 1.5);
@@ -552,7 +554,7 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
     if (deg < options.distinct_deg) continue;
     result.runner_up = candidates[k].table_from_object;
     result.runner_up_deg = deg;
-    result.runner_up_ratio = candidates[k].rms / std::max(1e-12, best.rms);
+    result.runner_up_ratio = candidates[k].rms / std::max(1e-12, best_refined_rms);
     result.ambiguous = result.runner_up_ratio < options.ambiguity_ratio;
     break;
   }

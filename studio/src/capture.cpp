@@ -239,6 +239,8 @@ CaptureResult CaptureSession(const std::filesystem::path& folder, Session& sessi
       laid = pass;
       CAROUSEL_LOG_INFO("pass " << pass + 1 << " of " << passes << ": the product "
                                 << session.passes[static_cast<std::size_t>(pass)].orientation);
+      // The table stands still while the operator handles the product.
+      if (moving_to >= 0) rig.turntable->WaitUntilStopped(move_timeout);
       rig.turn_product(pass);
     }
     if (pass == 0 && laid < 0) laid = 0;
@@ -372,7 +374,12 @@ CaptureResult CaptureSession(const std::filesystem::path& folder, Session& sessi
     session.stages["capture"] = "done";
     session.stage_seconds["capture"] = watch.ElapsedSeconds();
     if (capture_changed) {
-      // New photos make the later stages stale.
+      // New photos make the later stages stale, and the passes' registrations with them.
+      for (SessionPass& pass : session.passes) {
+        pass.registration.clear();
+        pass.registration_note.clear();
+        pass.table_from_object.reset();
+      }
       session.stages.erase("reconstruct");
       session.stages.erase("texture");
       session.stages.erase("calibrate");

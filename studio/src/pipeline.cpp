@@ -187,8 +187,12 @@ ProcessResult ProcessSession(const std::filesystem::path& folder, Session& sessi
   std::vector<std::string> changed_photos;
   const std::string recon_inputs =
       ReconstructInputs(folder, session, options.reconstruct, &changed_photos);
+  // The views the model is made from (a later pass left out by the last reconstruction has
+  // no masks and needs none).
   bool masks_present = true;
-  for (const SessionView& view : session.views) {
+  const std::size_t used = SessionViews(folder, session).size();
+  for (std::size_t i = 0; i < used; ++i) {
+    const SessionView& view = session.views[i];
     masks_present =
         masks_present && !view.mask.empty() && std::filesystem::is_regular_file(folder / view.mask);
   }

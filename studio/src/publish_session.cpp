@@ -157,9 +157,11 @@ double CameraElevationDeg(const Session& session, const Eigen::AlignedBox3d& box
 // The views of one camera that make a 360° set of `frames` by themselves (that many stops at
 // equal steps, every one with a mask), in table-angle order; empty when no camera has them.
 std::vector<int> PhotoSpin(const Session& session, int frames, int* camera_out) {
+  // The product as it stands (the first pass): a later pass shows it laid down.
   std::map<int, std::vector<int>> by_camera;
   for (std::size_t i = 0; i < session.views.size(); ++i)
-    by_camera[session.views[i].camera].push_back(static_cast<int>(i));
+    if (session.views[i].pass == 0)
+      by_camera[session.views[i].camera].push_back(static_cast<int>(i));
   for (auto& [camera, views] : by_camera) {
     if (static_cast<int>(views.size()) != frames) continue;
     std::sort(views.begin(), views.end(), [&](int a, int b) {

@@ -260,6 +260,7 @@ std::vector<PassOutcome> RegisterPasses(const Session& session_in, Session& sess
   std::vector<View> reference;
   for (std::size_t i = 0; i < views.size(); ++i)
     if (session.views[i].pass == 0) reference.push_back(views[i]);
+  int unregistered = 0;  // the first pass not registered (0: none yet)
   for (int pass = 1; pass < passes; ++pass) {
     PassOutcome outcome;
     outcome.pass = pass;
@@ -281,7 +282,12 @@ std::vector<PassOutcome> RegisterPasses(const Session& session_in, Session& sess
       }
     }
     record.table_from_object.reset();
-    if (const auto it = silhouettes_failed.find(pass); it != silhouettes_failed.end()) {
+    if (unregistered > 0) {
+      // The passes reach the model in order (SessionViews).
+      outcome.status = "failed";
+      outcome.note = name + ": not used, because pass " + std::to_string(unregistered + 1) +
+                     " before it was not registered";
+    } else if (const auto it = silhouettes_failed.find(pass); it != silhouettes_failed.end()) {
       outcome.status = "failed";
       outcome.note = name + ": its silhouettes cannot be found: " + it->second;
     } else if (which.size() < 2) {
@@ -342,6 +348,7 @@ std::vector<PassOutcome> RegisterPasses(const Session& session_in, Session& sess
         views[i].mutable_camera() = camera;
       }
     } else {
+      if (unregistered == 0) unregistered = pass;
       CAROUSEL_LOG_WARN(outcome.note << "; the model is made without it");
     }
     outcomes.push_back(outcome);

@@ -331,9 +331,11 @@ RunResult RunSession(const RunOptions& requested, Progress& progress) {
   return Continue(folder, options, rig, progress);
 }
 
-RunResult ResumeSession(const std::filesystem::path& session, Progress& progress) {
+RunResult ResumeSession(const std::filesystem::path& session, Progress& progress,
+                        std::function<void(int pass, int passes)> turn_product) {
   if (!std::filesystem::is_directory(session)) throw IoError(session, "is not a session folder");
   RunOptions options = RunFromJson(session / kRunFile);
+  options.turn_product = std::move(turn_product);
   options.out = session.parent_path();
   options.Validate();
   RigBackends rig = OpenRig(RigRequestFor(options));

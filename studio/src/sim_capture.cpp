@@ -72,7 +72,7 @@ const std::vector<std::string>& RunSimFieldNames() {
       "scene",      "data",       "views",    "size",           "elevations",    "focal-mm",
       "distance",   "noise",      "seed",     "jpeg-quality",   "target-height", "scale",
       "yaw-deg",    "material",   "exposure", "contact-shadow", "cast-shadow",   "backdrop-falloff",
-      "vignetting", "mask-shots", "backdrop", "orientations",   "second-pose"};
+      "vignetting", "mask-shots", "backdrop", "orientations",   "second-pose",   "pose-seed"};
   return names;
 }
 

@@ -51,14 +51,16 @@ TextureSessionResult TextureSession(const std::filesystem::path& session_folder,
   // would agree with the mesh everywhere and correct nothing. Without masks (a dataset
   // imported with its mesh) it is skipped, and the run says so.
   bool correction = options.grouping.correction;
+  // Over the views the model is made from (those of a later pass left out come after them).
   const auto no_mask = [](const SessionView& v) { return v.mask.empty(); };
-  const auto unmasked = std::count_if(session.views.begin(), session.views.end(), no_mask);
+  const auto used_end = session.views.begin() + static_cast<std::ptrdiff_t>(views.size());
+  const auto unmasked = std::count_if(session.views.begin(), used_end, no_mask);
   if (correction && unmasked > 0) {
     correction = false;
     result.warnings.push_back(
-        std::to_string(unmasked) + " of " + std::to_string(session.views.size()) +
+        std::to_string(unmasked) + " of " + std::to_string(views.size()) +
         " views have no mask (the first: " +
-        std::find_if(session.views.begin(), session.views.end(), no_mask)->image +
+        std::find_if(session.views.begin(), used_end, no_mask)->image +
         "): the missing-colour correction is skipped (masks come from `carousel reconstruct` "
         "or `carousel import --masks`)");
   }

@@ -140,6 +140,11 @@ TEST(PassesTest, ASecondPassOutOfFrameIsNamedAndLeftOut) {
       << note;
   EXPECT_NE(note.find("pass1_cam0_stop"), std::string::npos) << note;
   EXPECT_EQ(result.model_views, 8);
+  // The left-out pass's photos have no masks; the texture of the first pass's model still
+  // corrects missing colours (it needs masks only of the views it is made from).
+  const TextureSessionResult textured = TextureSession(dir / "shoe", {}, progress);
+  EXPECT_EQ(textured.views, 8);
+  EXPECT_TRUE(textured.warnings.empty()) << textured.warnings.front();
 }
 
 TEST(PassesTest, TheManifestRefusesPassesOutOfOrderOrUnlisted) {

@@ -37,6 +37,7 @@ std::vector<SessionSummary> ListSessions(const std::filesystem::path& out);
 struct PhotoThumb {
   std::string stem;  // "cam0_stop03"
   int camera = 0, stop = 0;
+  int pass = 0;  // the pass (the product laid down another way) it belongs to
   double table_angle_deg = 0.0;
   bool verified = false;  // the file's SHA-256 equals the manifest's
   std::string problem;    // why not (missing, checksum differs, undecodable)

@@ -79,9 +79,12 @@ std::string SessionNameForProduct(const std::string& product);
 // stages throw.
 RunResult RunSession(const RunOptions& options, Progress& progress);
 
-// Continues a session started by RunSession. \throw IoError/FormatError naming run.json or
-// session.json, and what the stages throw.
-RunResult ResumeSession(const std::filesystem::path& session, Progress& progress);
+// Continues a session started by RunSession. On hardware, `turn_product` (as
+// RunOptions::turn_product) asks the operator to lay the product as the pass the first
+// missing photo belongs to needs. \throw IoError/FormatError naming run.json or session.json,
+// and what the stages throw.
+RunResult ResumeSession(const std::filesystem::path& session, Progress& progress,
+                        std::function<void(int pass, int passes)> turn_product = {});
 
 // The publish options a session goes on with: those it last published with
 // (model/publish.json's "options"), else those its `carousel run` was given (run.json), else the
