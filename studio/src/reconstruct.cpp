@@ -318,8 +318,9 @@ std::vector<PassOutcome> RegisterPasses(const Session& session_in, Session& sess
         if (!found.matches) {
           outcome.status = "failed";
           outcome.note = note.str() +
-                         ": its silhouettes do not fit pass 1's at any pose, so it "
-                         "does not show the same product";
+                         ": its silhouettes do not fit pass 1's at any pose, so it does not show "
+                         "the same product, or its silhouettes miss part of it (a part the "
+                         "colour of the backdrop: take backlit mask shots)";
         } else if (found.ambiguous) {
           outcome.status = "ambiguous";
           outcome.note = note.str() +
