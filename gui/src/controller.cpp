@@ -287,6 +287,17 @@ void StudioController::Launch(JobKind kind, const std::string& product,
   });
 }
 
+void StudioController::WaitForOperator(int index, int placements, bool product) {
+  std::unique_lock<std::mutex> lock(mutex_);
+  status_.board_prompt = BoardPrompt{index, placements, product};
+  board_confirmed_ = false;
+  status_.stage_changes = ++change_base_ + tracker_.changes();
+  board_placed_.wait(lock, [this] { return board_confirmed_ || token_.IsCancelled(); });
+  status_.board_prompt.reset();
+  if (token_.IsCancelled())
+    throw Cancelled(product ? "laying the product down cancelled" : "board placement cancelled");
+}
+
 void StudioController::StartRun(studio::RunOptions options) {
   CAROUSEL_THROW_IF(options.product.empty(), InvalidArgument, "enter the product's SKU");
   options.Validate();
@@ -294,24 +305,12 @@ void StudioController::StartRun(studio::RunOptions options) {
       options.out / studio::SessionNameForProduct(options.product);
   // On hardware the operator places the board, or lays the product down for a later pass,
   // and confirms in the window.
-  auto wait_for_operator = [this](int index, int placements, bool product) {
-    std::unique_lock<std::mutex> lock(mutex_);
-    status_.board_prompt = BoardPrompt{index, placements, product};
-    board_confirmed_ = false;
-    status_.stage_changes = ++change_base_ + tracker_.changes();
-    board_placed_.wait(lock, [this] { return board_confirmed_ || token_.IsCancelled(); });
-    status_.board_prompt.reset();
-    if (token_.IsCancelled())
-      throw Cancelled(product ? "laying the product down cancelled" : "board placement cancelled");
-  };
   if (options.calibration && options.hardware) {
-    options.place_board = [wait_for_operator](int index, int placements) {
-      wait_for_operator(index, placements, false);
+    options.place_board = [this](int index, int placements) {
+      WaitForOperator(index, placements, false);
     };
   } else if (options.hardware && options.hardware->capture.orientations > 1) {
-    options.turn_product = [wait_for_operator](int pass, int passes) {
-      wait_for_operator(pass, passes, true);
-    };
+    options.turn_product = [this](int pass, int passes) { WaitForOperator(pass, passes, true); };
   }
   const std::string product = options.product;
   const bool calibration = options.calibration.has_value();
@@ -332,15 +331,7 @@ void StudioController::StartResume(const std::filesystem::path& session) {
                   "Reprocess to build it again from its photos");
   // A hardware session of several passes asks the operator, in the window, to lay the
   // product as the pass it resumes in needs.
-  auto turn_product = [this](int pass, int passes) {
-    std::unique_lock<std::mutex> lock(mutex_);
-    status_.board_prompt = BoardPrompt{pass, passes, true};
-    board_confirmed_ = false;
-    status_.stage_changes = ++change_base_ + tracker_.changes();
-    board_placed_.wait(lock, [this] { return board_confirmed_ || token_.IsCancelled(); });
-    status_.board_prompt.reset();
-    if (token_.IsCancelled()) throw Cancelled("laying the product down cancelled");
-  };
+  auto turn_product = [this](int pass, int passes) { WaitForOperator(pass, passes, true); };
   Launch(JobKind::kResume, session.filename().string(), session,
          [session, turn_product](Progress& progress, std::optional<studio::RunResult>* run,
                                  std::optional<studio::ProcessResult>*) {

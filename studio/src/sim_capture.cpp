@@ -308,11 +308,15 @@ sim::Scene LaidDownScene(const sim::Scene& scene, const SimCaptureOptions& optio
   const Rigid3d turn = SecondPassRotation(options.second_pose, scene.Bounds(), options.pose_seed);
   sim::Scene turned = scene;
   turned.Transform(Rigid3d(turn.rotation, Eigen::Vector3d::Zero()));
-  const Eigen::AlignedBox3d box = turned.Bounds();
-  const Eigen::Vector3d offset(turn.translation.x() + options.second_offset_m - box.center().x(),
-                               turn.translation.y() - box.center().y(), -box.min().z());
-  turned.Transform(Rigid3d(Eigen::Matrix3d::Identity(), offset));
-  *table_from_object = Rigid3d(turn.rotation, offset);
+  // Centred on the table's axis and set on the plate as the first pass was, then moved off the
+  // centre as the pose says.
+  const sim::Placement placed = sim::PlaceOnTurntable(turned, {});
+  const Rigid3d off_centre(
+      Eigen::Matrix3d::Identity(),
+      Eigen::Vector3d(turn.translation.x() + options.second_offset_m, turn.translation.y(), 0.0));
+  turned.Transform(off_centre);
+  *table_from_object =
+      off_centre * placed.transform * Rigid3d(turn.rotation, Eigen::Vector3d::Zero());
   return turned;
 }
 

@@ -135,6 +135,9 @@ class StudioController {
   JobStatus Wait();
 
  private:
+  // On the worker: shows the prompt (the board's placement `index`, or the product's pass
+  // when `product`) and waits for ConfirmBoardPlaced(). \throw Cancelled.
+  void WaitForOperator(int index, int placements, bool product);
   template <typename Work>
   void Launch(JobKind kind, const std::string& product, const std::filesystem::path& session,
               Work work);
