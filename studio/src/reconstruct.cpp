@@ -230,17 +230,6 @@ recon::SilhouettesResult FindSilhouettesPerPass(
   return result;
 }
 
-// Object pixels on the frame's edge: the product runs out of the photo.
-bool TouchesEdge(const cv::Mat& mask) {
-  const int w = mask.cols, h = mask.rows;
-  int touching = 0;
-  for (int x = 0; x < w; ++x)
-    touching += (mask.at<uchar>(0, x) >= 128) + (mask.at<uchar>(h - 1, x) >= 128);
-  for (int y = 0; y < h; ++y)
-    touching += (mask.at<uchar>(y, 0) >= 128) + (mask.at<uchar>(y, w - 1) >= 128);
-  return touching > (w + h) / 100;
-}
-
 std::string Millimetres(double metres) {
   std::ostringstream text;
   text << std::fixed << std::setprecision(2) << metres * 1e3 << " mm";
@@ -271,16 +260,11 @@ std::vector<PassOutcome> RegisterPasses(const Session& session_in, Session& sess
     for (std::size_t i = 0; i < views.size(); ++i)
       if (session.views[i].pass == pass) which.push_back(i);
     outcome.views = static_cast<int>(which.size());
+    // A pass whose product runs out of the frame failed in its silhouettes already (their
+    // border check names the photo).
     std::vector<View> moved;
-    int out_of_frame = 0;
-    std::string first_out;
-    for (const std::size_t i : which) {
-      if (silhouettes_failed.contains(pass)) break;
-      moved.push_back(views[i]);
-      if (TouchesEdge(views[i].Mask())) {
-        if (out_of_frame++ == 0) first_out = views[i].name();
-      }
-    }
+    if (!silhouettes_failed.contains(pass))
+      for (const std::size_t i : which) moved.push_back(views[i]);
     record.table_from_object.reset();
     if (unregistered > 0) {
       // The passes reach the model in order (SessionViews).
@@ -293,12 +277,6 @@ std::vector<PassOutcome> RegisterPasses(const Session& session_in, Session& sess
     } else if (which.size() < 2) {
       outcome.status = "failed";
       outcome.note = name + " has " + std::to_string(which.size()) + " view(s); it needs 2 or more";
-    } else if (out_of_frame > options.max_out_of_frame * static_cast<double>(which.size())) {
-      outcome.status = "failed";
-      outcome.note = name + ": the product runs out of the frame in " +
-                     std::to_string(out_of_frame) + " of " + std::to_string(which.size()) +
-                     " views (the first: " + first_out +
-                     "); lay it nearer the plate's centre or move the cameras back";
     } else {
       try {
         recon::RegistrationOptions registration = options.registration;
@@ -386,13 +364,6 @@ const OptionTable<ReconstructOptions>& ReconstructOptions::Fields() {
           .Include(&ReconstructOptions::hull, recon::VisualHullOptions::Fields())
           .Include(&ReconstructOptions::mesh, recon::MeshOptimizationOptions::Fields())
           .Include(&ReconstructOptions::registration, recon::RegistrationOptions::Fields())
-          .Add(&ReconstructOptions::max_out_of_frame,
-               {.name = "max-out-of-frame",
-                .help = "a later pass is left out when more of its views show the product "
-                        "touching the frame's edge",
-                .min = 0,
-                .max = 1,
-                .advanced = true})
           .Add(&ReconstructOptions::max_outline_deviation_px,
                {.name = "max-outline-deviation",
                 .help = "a mesh whose outline strays further from the silhouettes on average is "

@@ -28,9 +28,6 @@ struct ReconstructOptions {
   recon::MeshOptimizationOptions mesh;
   // Later passes (the product laid down another way) registered to the first.
   recon::RegistrationOptions registration;
-  // A later pass is left out when more than this fraction of its views show the product
-  // touching the frame's edge (out of frame), 0..1.
-  double max_out_of_frame = 0.25;
   // A mesh whose outline deviates further than this from the silhouettes on average (pixels)
   // is made again with twice the faces, up to 8 x mesh.target_faces; 0 = never.
   double max_outline_deviation_px = 1.0;
