@@ -96,6 +96,13 @@ function(carousel_add_test name)
   target_link_libraries(${name} PRIVATE carousel_testing ${ARG_LINKS} GTest::gmock GTest::gtest_main)
   set_target_properties(${name} PROPERTIES RUNTIME_OUTPUT_DIRECTORY "${CMAKE_BINARY_DIR}/tests")
   _carousel_apply_defaults(${name})
+  # Under the sanitizers, unit tests also catch a use of a stack frame after its function
+  # returned (fake stacks: ~16 % slower, too slow for the integration tests' whole sessions).
+  set(_extra_properties)
+  if(CMAKE_BUILD_TYPE STREQUAL "Sanitize" AND "unit" IN_LIST ARG_LABELS)
+    set(_extra_properties ENVIRONMENT_MODIFICATION
+      "ASAN_OPTIONS=string_append::detect_stack_use_after_return=1")
+  endif()
   gtest_discover_tests(${name}
     DISCOVERY_MODE PRE_TEST
     # Listing takes 0.4 s, but a loaded 2-core CI machine once exceeded CMake's 5 s default.
@@ -105,5 +112,5 @@ function(carousel_add_test name)
     # the fixture carousel_test_cache empties it before any test starts.
     PROPERTIES LABELS "${ARG_LABELS}" TIMEOUT ${ARG_TIMEOUT}
       ENVIRONMENT "CAROUSEL_TEST_CACHE_DIR=${CMAKE_BINARY_DIR}/test-cache"
-      FIXTURES_REQUIRED carousel_test_cache)
+      FIXTURES_REQUIRED carousel_test_cache ${_extra_properties})
 endfunction()
