@@ -2,10 +2,15 @@
 // differ between photos evened out, so that seams between front images do not show.
 //
 // A face usable in several views gives one observation per view: the log of its mean colour
-// there (over the face's sample points; faces nearly black or saturated in a view are left
-// out). The log colour is modelled as the face's true log colour plus the view's log gain;
-// alternating least squares (true colours given the gains, gains given the true colours, the
-// gains' mean fixed at 0) runs 20 rounds.
+// there (over the face's sample points). Left out: faces nearly black or saturated in a view,
+// and faces on an edge of the texture there (their samples disagree: a boundary a little
+// misplaced by the geometry or the registration puts another colour under them in some views
+// and not in others). The log colour is modelled as the face's true log colour plus the view's
+// log gain and solved by alternating least squares (true colours given the gains, gains given
+// the true colours, the gains' mean fixed at 0), weighted per channel by the inverse variance
+// of a log (a dark channel's log is noisy) and, after the first rounds, by Huber weights on the
+// residuals, so that faces whose colour changes between views for other reasons (a highlight,
+// a shadow, light that a second pass lays differently) do not drag whole views along.
 #include <algorithm>
 #include <cmath>
 
@@ -17,7 +22,15 @@ namespace {
 struct Observation {
   int face, view;
   cv::Vec3d log_colour;
+  cv::Vec3d weight;  // per channel: 1 / the log's variance, relative
 };
+
+// A face's samples in one view that differ by more than this (relative to their mean
+// brightness, plus a little for noise) lie across an edge of the texture.
+constexpr double kEdgeSpread = 0.2;
+constexpr double kNoiseLevels = 8.0;
+// Huber's threshold on log residuals (about 5 %).
+constexpr double kHuberDelta = 0.05;
 
 std::vector<Observation> ObserveFaces(const std::vector<FaceData>& faces,
                                       const GroupingResult& grouping, const ViewSampler& sampler) {
@@ -31,11 +44,15 @@ std::vector<Observation> ObserveFaces(const std::vector<FaceData>& faces,
     for (int v = 0; v < nv; ++v) {
       if (!grouping.usable[f * nv + v]) continue;
       cv::Vec3d sum(0, 0, 0);
+      double low = 1e9, high = -1e9;
       int n = 0;
       for (const auto& b : kSamples) {
         cv::Vec3d c;
         if (sampler.Sample(v, At(faces[f], b), &c)) {
           sum += c;
+          const double brightness = c[0] + c[1] + c[2];
+          low = std::min(low, brightness);
+          high = std::max(high, brightness);
           ++n;
         }
       }
@@ -43,8 +60,13 @@ std::vector<Observation> ObserveFaces(const std::vector<FaceData>& faces,
       sum /= n;
       if (std::min({sum[0], sum[1], sum[2]}) < 12.0 || std::max({sum[0], sum[1], sum[2]}) > 243.0)
         continue;
-      observations.push_back({static_cast<int>(f), v,
-                              cv::Vec3d(std::log(sum[0]), std::log(sum[1]), std::log(sum[2]))});
+      if (high - low > kEdgeSpread * (sum[0] + sum[1] + sum[2]) + 3.0 * kNoiseLevels) continue;
+      Observation o{static_cast<int>(f),
+                    v,
+                    cv::Vec3d(std::log(sum[0]), std::log(sum[1]), std::log(sum[2])),
+                    {}};
+      for (int k = 0; k < 3; ++k) o.weight[k] = (sum[k] / 128.0) * (sum[k] / 128.0);
+      observations.push_back(o);
     }
   }
   return observations;
@@ -59,32 +81,49 @@ std::vector<cv::Vec3d> EstimateGains(const std::vector<FaceData>& faces,
   const std::vector<Observation> observations = ObserveFaces(faces, grouping, sampler);
   std::vector<cv::Vec3d> log_gain(nv, cv::Vec3d(0, 0, 0));
   std::vector<cv::Vec3d> log_true(nf, cv::Vec3d(0, 0, 0));
-  for (int iteration = 0; iteration < 20 && !observations.empty(); ++iteration) {
-    std::vector<cv::Vec3d> sum_f(nf, cv::Vec3d(0, 0, 0));
-    std::vector<int> n_f(nf, 0);
-    for (const auto& o : observations) {
-      sum_f[o.face] += o.log_colour - log_gain[o.view];
-      ++n_f[o.face];
+  std::vector<cv::Vec3d> robust(observations.size(), cv::Vec3d(1, 1, 1));
+  for (int iteration = 0; iteration < 30 && !observations.empty(); ++iteration) {
+    // Huber weights from the residuals once the first rounds have settled the solution.
+    if (iteration >= 5)
+      for (std::size_t i = 0; i < observations.size(); ++i) {
+        const Observation& o = observations[i];
+        for (int k = 0; k < 3; ++k) {
+          const double r = std::abs(o.log_colour[k] - log_true[o.face][k] - log_gain[o.view][k]);
+          robust[i][k] = r <= kHuberDelta ? 1.0 : kHuberDelta / r;
+        }
+      }
+    std::vector<cv::Vec3d> sum_f(nf, cv::Vec3d(0, 0, 0)), w_f(nf, cv::Vec3d(0, 0, 0));
+    for (std::size_t i = 0; i < observations.size(); ++i) {
+      const Observation& o = observations[i];
+      for (int k = 0; k < 3; ++k) {
+        const double w = o.weight[k] * robust[i][k];
+        sum_f[o.face][k] += w * (o.log_colour[k] - log_gain[o.view][k]);
+        w_f[o.face][k] += w;
+      }
     }
     for (std::size_t f = 0; f < nf; ++f)
-      if (n_f[f] > 0) log_true[f] = sum_f[f] / n_f[f];
-    std::vector<cv::Vec3d> sum_v(nv, cv::Vec3d(0, 0, 0));
-    std::vector<int> n_v(nv, 0);
-    for (const auto& o : observations) {
-      sum_v[o.view] += o.log_colour - log_true[o.face];
-      ++n_v[o.view];
+      for (int k = 0; k < 3; ++k)
+        if (w_f[f][k] > 0) log_true[f][k] = sum_f[f][k] / w_f[f][k];
+    std::vector<cv::Vec3d> sum_v(nv, cv::Vec3d(0, 0, 0)), w_v(nv, cv::Vec3d(0, 0, 0));
+    for (std::size_t i = 0; i < observations.size(); ++i) {
+      const Observation& o = observations[i];
+      for (int k = 0; k < 3; ++k) {
+        const double w = o.weight[k] * robust[i][k];
+        sum_v[o.view][k] += w * (o.log_colour[k] - log_true[o.face][k]);
+        w_v[o.view][k] += w;
+      }
     }
     cv::Vec3d mean(0, 0, 0);
     int used = 0;
     for (int v = 0; v < nv; ++v)
-      if (n_v[v] > 0) {
-        log_gain[v] = sum_v[v] / n_v[v];
+      if (w_v[v][0] > 0 && w_v[v][1] > 0 && w_v[v][2] > 0) {
+        for (int k = 0; k < 3; ++k) log_gain[v][k] = sum_v[v][k] / w_v[v][k];
         mean += log_gain[v];
         ++used;
       }
     if (used > 0) mean /= used;
     for (int v = 0; v < nv; ++v)
-      if (n_v[v] > 0) log_gain[v] -= mean;
+      if (w_v[v][0] > 0 && w_v[v][1] > 0 && w_v[v][2] > 0) log_gain[v] -= mean;
   }
   // Colours are divided by the view's gain to bring every view to the common level.
   std::vector<cv::Vec3d> gains(nv, cv::Vec3d(1, 1, 1));
