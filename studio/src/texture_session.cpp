@@ -66,6 +66,9 @@ TextureSessionResult TextureSession(const std::filesystem::path& session_folder,
   }
   texture::GroupingOptions grouping = options.grouping;
   grouping.correction = correction;
+  grouping.view_pass.clear();
+  for (std::size_t i = 0; i < views.size(); ++i)
+    grouping.view_pass.push_back(session.views[i].pass);
   Mesh mesh = ReadMesh(mesh_path, {.read_uvs = false});
   result.views = static_cast<int>(views.size());
   result.faces = mesh.n_faces();

@@ -144,9 +144,41 @@ ViewMeasures MeasureViews(const std::vector<FaceData>& faces, const std::vector<
   return m;
 }
 
+// Per face, the latest capture pass it may take its front view from: the earliest pass with a
+// view that reaches `ratio` of the face's best cosine (among the views that see it whole and
+// on the mask; else whole; else every pass).
+std::vector<int> LatestPasses(const ViewMeasures& m, std::size_t nf, int nv,
+                              const std::vector<int>& view_pass, double ratio) {
+  std::vector<int> max_pass(nf, std::numeric_limits<int>::max());
+  if (ratio <= 0.0 || std::all_of(view_pass.begin(), view_pass.end(), [](int p) { return p == 0; }))
+    return max_pass;
+  const int passes = *std::max_element(view_pass.begin(), view_pass.end()) + 1;
+  std::vector<float> best(static_cast<std::size_t>(passes));
+  for (std::size_t f = 0; f < nf; ++f) {
+    for (const bool need_mask : {true, false}) {
+      std::fill(best.begin(), best.end(), 0.0f);
+      for (int v = 0; v < nv; ++v) {
+        const std::size_t i = f * nv + v;
+        if (m.visible[i] && (m.on_mask[i] || !need_mask))
+          best[view_pass[v]] = std::max(best[view_pass[v]], m.cosine[i]);
+      }
+      const float overall = *std::max_element(best.begin(), best.end());
+      if (overall <= 0.0f) continue;
+      for (int p = 0; p < passes; ++p)
+        if (best[p] >= ratio * overall) {
+          max_pass[f] = p;
+          break;
+        }
+      break;
+    }
+  }
+  return max_pass;
+}
+
 // Each face's front view: the most frontal view that sees it whole and on the mask; else the
 // most frontal that sees it whole; else the most frontal that sees half of it.
 void ChooseFrontViews(const ViewMeasures& m, std::size_t nf, int nv, bool correction,
+                      const std::vector<int>& view_pass, const std::vector<int>& max_pass,
                       GroupingResult* result) {
   result->views = nv;
   result->front_view.assign(nf, Mesh::kNoView);
@@ -156,15 +188,15 @@ void ChooseFrontViews(const ViewMeasures& m, std::size_t nf, int nv, bool correc
     int best_visible = -1, best_ok = -1, best_partly = -1;
     for (int v = 0; v < nv; ++v) {
       const std::size_t i = f * nv + v;
-      if (m.cosine[i] <= 0.0f) continue;
+      result->usable[i] = m.visible[i] && m.on_mask[i] ? 1 : 0;
+      result->seen[i] = m.visible[i];
+      if (m.cosine[i] <= 0.0f || view_pass[v] > max_pass[f]) continue;
       if (m.visible[i] && (best_visible < 0 || m.cosine[i] > m.cosine[f * nv + best_visible]))
         best_visible = v;
       if (m.visible[i] && m.on_mask[i] && (best_ok < 0 || m.cosine[i] > m.cosine[f * nv + best_ok]))
         best_ok = v;
       if (m.partly[i] && (best_partly < 0 || m.cosine[i] > m.cosine[f * nv + best_partly]))
         best_partly = v;
-      result->usable[i] = m.visible[i] && m.on_mask[i] ? 1 : 0;
-      result->seen[i] = m.visible[i];
     }
     int front = best_ok;
     if (front >= 0 && best_ok != best_visible) ++result->corrected_faces;
@@ -181,6 +213,7 @@ void ChooseFrontViews(const ViewMeasures& m, std::size_t nf, int nv, bool correc
 // Island cleanup: a group of at most `max_island_faces` faces of one front view switches to
 // the neighbouring view its border meets most often for which every face of it is usable.
 void CleanIslands(const std::vector<FaceData>& faces, int max_island_faces,
+                  const std::vector<int>& view_pass, const std::vector<int>& max_pass,
                   GroupingResult* result) {
   const std::size_t nf = faces.size();
   const int nv = result->views;
@@ -210,7 +243,8 @@ void CleanIslands(const std::vector<FaceData>& faces, int max_island_faces,
     for (const auto& candidate : ranked) {
       const int other = candidate.first;
       const bool fits = std::all_of(members.begin(), members.end(), [&](int m) {
-        return result->usable[static_cast<std::size_t>(m) * nv + other] != 0;
+        return result->usable[static_cast<std::size_t>(m) * nv + other] != 0 &&
+               view_pass[other] <= max_pass[m];
       });
       if (!fits) continue;
       for (const int m : members) result->front_view[m] = other;
@@ -225,7 +259,8 @@ void CleanIslands(const std::vector<FaceData>& faces, int max_island_faces,
 // the least data cost (1 - cosine / best cosine) plus seam_cost per neighbour left on
 // another view; sweeps until nothing changes (at most 20).
 void MakeFrontViewsCoherent(const ViewMeasures& m, const std::vector<FaceData>& faces,
-                            double seam_cost, double min_ratio, GroupingResult* result) {
+                            double seam_cost, double min_ratio, const std::vector<int>& view_pass,
+                            const std::vector<int>& max_pass, GroupingResult* result) {
   const std::size_t nf = faces.size();
   const int nv = result->views;
   std::vector<float> best(nf, 0.0f);
@@ -249,7 +284,8 @@ void MakeFrontViewsCoherent(const ViewMeasures& m, const std::vector<FaceData>& 
       for (const int v : candidates) {
         if (v < 0) continue;
         const std::size_t i = f * nv + v;
-        if (!result->usable[i] || m.cosine[i] < min_ratio * best[f]) continue;
+        if (!result->usable[i] || m.cosine[i] < min_ratio * best[f] || view_pass[v] > max_pass[f])
+          continue;
         double cost = 1.0 - m.cosine[i] / best[f];
         for (const int g : faces[f].across) {
           if (g >= 0 && result->front_view[g] >= 0 && result->front_view[g] != v) cost += seam_cost;
@@ -334,6 +370,13 @@ const OptionTable<GroupingOptions>& GroupingOptions::Fields() {
            .min = 0.0,
            .max = 1.0,
            .advanced = true});
+    t.Add(&O::pass_cosine_ratio,
+          {.name = "pass-cosine-ratio",
+           .help = "a face takes a photo of a later capture pass only where no photo of an "
+                   "earlier one sees it at this fraction of its best cosine (0: any pass)",
+           .min = 0.0,
+           .max = 1.0,
+           .advanced = true});
     t.Add(&O::zbuffer_max_side, {.name = "zbuffer-max-side",
                                  .help = "longest side of the per-view visibility z-buffers",
                                  .unit = "px",
@@ -358,15 +401,26 @@ GroupingResult GroupFaces(const Mesh& mesh, const std::vector<View>& views,
                       "texture: excluded view " << v << " outside 0.." << nv - 1);
     excluded[v] = 1;
   }
+  CAROUSEL_THROW_IF(
+      !options.view_pass.empty() && options.view_pass.size() != views.size(), InvalidArgument,
+      "texture: " << options.view_pass.size() << " view passes for " << nv << " views");
+  for (const int p : options.view_pass)
+    CAROUSEL_THROW_IF(p < 0, InvalidArgument, "texture: a view's pass is negative (" << p << ")");
   Stopwatch stopwatch;
   progress.BeginStage("texture: grouping");
   const std::vector<FaceData> faces = internal::ReadFaces(mesh);
   const ViewMeasures measures = MeasureViews(faces, views, excluded, options, progress);
+  const std::vector<int> view_pass =
+      options.view_pass.empty() ? std::vector<int>(nv, 0) : options.view_pass;
+  const std::vector<int> max_pass =
+      LatestPasses(measures, faces.size(), nv, view_pass, options.pass_cosine_ratio);
   GroupingResult result;
-  ChooseFrontViews(measures, faces.size(), nv, options.correction, &result);
+  ChooseFrontViews(measures, faces.size(), nv, options.correction, view_pass, max_pass, &result);
   if (options.seam_cost > 0.0)
-    MakeFrontViewsCoherent(measures, faces, options.seam_cost, options.min_cosine_ratio, &result);
-  if (options.max_island_faces > 0) CleanIslands(faces, options.max_island_faces, &result);
+    MakeFrontViewsCoherent(measures, faces, options.seam_cost, options.min_cosine_ratio, view_pass,
+                           max_pass, &result);
+  if (options.max_island_faces > 0)
+    CleanIslands(faces, options.max_island_faces, view_pass, max_pass, &result);
   CountPatches(faces, &result);
   progress.EndStage();
   result.seconds = stopwatch.ElapsedSeconds();

@@ -50,6 +50,12 @@ struct GroupingOptions {
   // patches; this keeps large patches. 0: every face takes its most frontal view.
   double seam_cost = 0.25;
   double min_cosine_ratio = 0.7;
+  // The capture pass of each view (empty: one pass). A face takes its front view from the
+  // earliest pass that sees it nearly as frontally as any: a later pass (the product laid
+  // down another way, lit another way) only where no view of an earlier one reaches
+  // pass_cosine_ratio of the face's best cosine. 0: from whichever pass sees it best.
+  std::vector<int> view_pass;
+  double pass_cosine_ratio = 0.8;
   // Longest side of the per-view z-buffers, pixels (the photo is scaled down to it), 64..8192.
   int zbuffer_max_side = 1600;
   // The description of every field above (core/options.h): flags, widgets, range checks.
