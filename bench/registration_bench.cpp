@@ -28,6 +28,7 @@
 #include "carousel/core/progress.h"
 #include "carousel/core/timer.h"
 #include "carousel/recon/recon.h"
+#include "carousel/recon/reprojection.h"
 #include "carousel/studio/pipeline.h"
 #include "carousel/studio/reconstruct.h"
 #include "carousel/studio/session.h"
@@ -109,6 +110,34 @@ ModelFigures ScoreModel(const std::filesystem::path& folder, bool gain, Progress
   }
   figures.below_psnr = texture::MeanPsnrDb(below);
   return figures;
+}
+
+// The mesh's silhouettes against the simulator's exact ones, per pass (the second pass's
+// cameras brought into the object frame by the true pose): mean IoU and mean deviation.
+struct PassAgreement {
+  double iou = 0.0, deviation_px = 0.0;
+};
+std::vector<PassAgreement> TrueSilhouetteAgreement(const Mesh& mesh,
+                                                   const std::filesystem::path& folder,
+                                                   const studio::Session& session) {
+  std::vector<PassAgreement> passes(session.ground_truth.table_from_object.size());
+  std::vector<int> counts(passes.size(), 0);
+  for (std::size_t i = 0; i < session.views.size(); ++i) {
+    const studio::SessionView& entry = session.views[i];
+    CameraModel camera = entry.camera_model;
+    camera.cam_from_world =
+        camera.cam_from_world * session.ground_truth.table_from_object.at(entry.pass);
+    const recon::SilhouetteAgreement a =
+        recon::CompareSilhouette(mesh, camera, ReadMask(folder / session.ground_truth.masks.at(i)));
+    passes[entry.pass].iou += a.iou;
+    passes[entry.pass].deviation_px += a.mean_deviation_px;
+    ++counts[entry.pass];
+  }
+  for (std::size_t p = 0; p < passes.size(); ++p) {
+    passes[p].iou /= std::max(1, counts[p]);
+    passes[p].deviation_px /= std::max(1, counts[p]);
+  }
+  return passes;
 }
 
 // A copy of the session with its first pass only.
@@ -230,6 +259,16 @@ int main(int argc, char** argv) {
             truth_volume * 1e6, f.unseen_faces, f.faces,
             100.0 * f.unseen_faces / std::max<std::size_t>(1, f.faces), f.held_out_psnr,
             f.below_psnr);
+        const std::filesystem::path from = name == std::string("one pass") ? one : folder;
+        for (const char* file : {"recon/hull.ply", "recon/mesh.ply"}) {
+          const std::vector<PassAgreement> agreement =
+              TrueSilhouetteAgreement(ReadMesh(from / file), folder, session);
+          std::printf("    %s vs the true silhouettes:", file);
+          for (std::size_t p = 0; p < agreement.size(); ++p)
+            std::printf(" pass %zu IoU %.4f, %.2f px;", p + 1, agreement[p].iou,
+                        agreement[p].deviation_px);
+          std::printf("\n");
+        }
       }
       std::fflush(stdout);
     }
