@@ -15,6 +15,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <fstream>
 #include <functional>
@@ -361,9 +362,10 @@ TEST(RunSessionTest, ResumeRetakesMissingAndDamagedPhotosAndKeepsTheDamagedCopy)
 }
 
 // Two orientations on the simulated rig (it lays the product down itself between the passes):
-// the second pass's photos are tagged and registered; a resume that has to retake the last
-// photo of the first pass and the first of the second stands the product back up, lays it
-// down again, and keeps every other photo byte for byte.
+// a run killed (SIGKILL) as the second pass begins resumes with the first pass's photos kept
+// byte for byte and lays the product down again; the second pass's photos are tagged and
+// registered; a resume that has to retake the last photo of the first pass and the first of
+// the second stands the product back up, lays it down again, and keeps every other photo.
 TEST(RunSessionTest, TwoOrientationsAreRegisteredAndResumedAcrossThePassBoundary) {
   TempDir dir;
   std::vector<std::string> args = {"run",
@@ -383,15 +385,36 @@ TEST(RunSessionTest, TwoOrientationsAreRegisteredAndResumedAcrossThePassBoundary
                                    "--backdrop",
                                    "grey",
                                    "--no-publish"};
-  ASSERT_EQ(Wait(Spawn(args)), 0);
   const auto session = dir.path() / "two-passes";
+  // Killed at the pass boundary: the second pass's first photo on disk.
+  const pid_t pid = Spawn(args);
+  Stopwatch waited;
+  while (!std::filesystem::exists(session / "images" / "pass1_cam0_stop00.jpg") &&
+         waited.ElapsedSeconds() < 300.0)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  kill(pid, SIGKILL);
+  Wait(pid);
+  const auto at_kill = Recorded(session);
+  int first_pass_at_kill = 0;
+  for (const auto& [image, sha] : at_kill)
+    first_pass_at_kill += image.find("pass1_") == std::string::npos ? 1 : 0;
+  EXPECT_EQ(first_pass_at_kill, 8);
+  ASSERT_EQ(Wait(Spawn({"run", "--resume", session.string()})), 0);
   const Session first = ReadSession(session);
   ASSERT_EQ(first.views.size(), 16u);
+  for (const auto& [image, sha] : at_kill) {
+    const auto it = std::find_if(first.views.begin(), first.views.end(),
+                                 [&](const SessionView& v) { return v.image == image; });
+    ASSERT_NE(it, first.views.end()) << image;
+    EXPECT_EQ(it->sha256, sha) << image << " retaken";
+  }
   ASSERT_EQ(first.passes.size(), 2u);
   EXPECT_EQ(first.passes[1].orientation, "side");
   EXPECT_EQ(first.passes[1].registration, "registered") << first.passes[1].registration_note;
   EXPECT_EQ(first.views[8].image, "images/pass1_cam0_stop00.jpg");
-  EXPECT_EQ(first.views[8].pass, 1);
+  for (std::size_t i = 0; i < first.views.size(); ++i)
+    EXPECT_EQ(first.views[i].pass, i < 8 ? 0 : 1) << first.views[i].image;
+  EXPECT_EQ(first.stages.at("texture"), "done");
   const auto before = Recorded(session);
   std::map<std::string, cv::Mat> originals;
   for (const char* image : {"cam0_stop07.jpg", "pass1_cam0_stop00.jpg"}) {
