@@ -82,6 +82,26 @@ std::vector<cv::Vec3d> EstimateGains(const std::vector<FaceData>& faces,
   std::vector<cv::Vec3d> log_gain(nv, cv::Vec3d(0, 0, 0));
   std::vector<cv::Vec3d> log_true(nf, cv::Vec3d(0, 0, 0));
   std::vector<cv::Vec3d> robust(observations.size(), cv::Vec3d(1, 1, 1));
+  // Per face (true colours given the gains) or per view (gains given the true colours): the
+  // weighted mean of the observations' log colours less the other term.
+  const auto weighted_means = [&](bool per_face, std::size_t n, std::vector<cv::Vec3d>* means,
+                                  std::vector<cv::Vec3d>* weights) {
+    std::vector<cv::Vec3d> sum(n, cv::Vec3d(0, 0, 0));
+    weights->assign(n, cv::Vec3d(0, 0, 0));
+    for (std::size_t i = 0; i < observations.size(); ++i) {
+      const Observation& o = observations[i];
+      const int at = per_face ? o.face : o.view;
+      const cv::Vec3d& other = per_face ? log_gain[o.view] : log_true[o.face];
+      for (int k = 0; k < 3; ++k) {
+        const double w = o.weight[k] * robust[i][k];
+        sum[at][k] += w * (o.log_colour[k] - other[k]);
+        (*weights)[at][k] += w;
+      }
+    }
+    for (std::size_t j = 0; j < n; ++j)
+      for (int k = 0; k < 3; ++k)
+        if ((*weights)[j][k] > 0) (*means)[j][k] = sum[j][k] / (*weights)[j][k];
+  };
   for (int iteration = 0; iteration < 30 && !observations.empty(); ++iteration) {
     // Huber weights from the residuals once the first rounds have settled the solution.
     if (iteration >= 5)
@@ -92,32 +112,13 @@ std::vector<cv::Vec3d> EstimateGains(const std::vector<FaceData>& faces,
           robust[i][k] = r <= kHuberDelta ? 1.0 : kHuberDelta / r;
         }
       }
-    std::vector<cv::Vec3d> sum_f(nf, cv::Vec3d(0, 0, 0)), w_f(nf, cv::Vec3d(0, 0, 0));
-    for (std::size_t i = 0; i < observations.size(); ++i) {
-      const Observation& o = observations[i];
-      for (int k = 0; k < 3; ++k) {
-        const double w = o.weight[k] * robust[i][k];
-        sum_f[o.face][k] += w * (o.log_colour[k] - log_gain[o.view][k]);
-        w_f[o.face][k] += w;
-      }
-    }
-    for (std::size_t f = 0; f < nf; ++f)
-      for (int k = 0; k < 3; ++k)
-        if (w_f[f][k] > 0) log_true[f][k] = sum_f[f][k] / w_f[f][k];
-    std::vector<cv::Vec3d> sum_v(nv, cv::Vec3d(0, 0, 0)), w_v(nv, cv::Vec3d(0, 0, 0));
-    for (std::size_t i = 0; i < observations.size(); ++i) {
-      const Observation& o = observations[i];
-      for (int k = 0; k < 3; ++k) {
-        const double w = o.weight[k] * robust[i][k];
-        sum_v[o.view][k] += w * (o.log_colour[k] - log_true[o.face][k]);
-        w_v[o.view][k] += w;
-      }
-    }
+    std::vector<cv::Vec3d> w_f, w_v;
+    weighted_means(true, nf, &log_true, &w_f);
+    weighted_means(false, static_cast<std::size_t>(nv), &log_gain, &w_v);
     cv::Vec3d mean(0, 0, 0);
     int used = 0;
     for (int v = 0; v < nv; ++v)
       if (w_v[v][0] > 0 && w_v[v][1] > 0 && w_v[v][2] > 0) {
-        for (int k = 0; k < 3; ++k) log_gain[v][k] = sum_v[v][k] / w_v[v][k];
         mean += log_gain[v];
         ++used;
       }
