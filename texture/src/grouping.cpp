@@ -188,9 +188,10 @@ void ChooseFrontViews(const ViewMeasures& m, std::size_t nf, int nv, bool correc
     int best_visible = -1, best_ok = -1, best_partly = -1;
     for (int v = 0; v < nv; ++v) {
       const std::size_t i = f * nv + v;
+      if (m.cosine[i] <= 0.0f) continue;
       result->usable[i] = m.visible[i] && m.on_mask[i] ? 1 : 0;
       result->seen[i] = m.visible[i];
-      if (m.cosine[i] <= 0.0f || view_pass[v] > max_pass[f]) continue;
+      if (view_pass[v] > max_pass[f]) continue;  // usable (gains, blending), not a front view
       if (m.visible[i] && (best_visible < 0 || m.cosine[i] > m.cosine[f * nv + best_visible]))
         best_visible = v;
       if (m.visible[i] && m.on_mask[i] && (best_ok < 0 || m.cosine[i] > m.cosine[f * nv + best_ok]))
