@@ -249,9 +249,13 @@ int main(int argc, char** argv) {
       studio::ReconstructSession(one, studio::ReconstructOptions(), progress);
       const ModelFigures single = ScoreModel(one, !no_gain, progress);
       const ModelFigures both = ScoreModel(folder, !no_gain, progress);
-      for (const auto& [name, f] :
-           {std::pair<const char*, const ModelFigures&>{"one pass", single},
-            std::pair<const char*, const ModelFigures&>{"two passes", both}}) {
+      struct Model {
+        const char* name;
+        const ModelFigures& f;
+        std::filesystem::path folder;
+      };
+      for (const auto& [name, f, from] :
+           {Model{"one pass", single, one}, Model{"two passes", both, folder}}) {
         std::printf(
             "  %s: hull volume %.1f cm3 (%+.1f%% vs the true mesh's %.1f cm3), %d of %zu faces "
             "(%.2f%%) seen by no view, held-out side views %.2f dB, views from below %.2f dB\n",
@@ -259,7 +263,6 @@ int main(int argc, char** argv) {
             truth_volume * 1e6, f.unseen_faces, f.faces,
             100.0 * f.unseen_faces / std::max<std::size_t>(1, f.faces), f.held_out_psnr,
             f.below_psnr);
-        const std::filesystem::path from = name == std::string("one pass") ? one : folder;
         for (const char* file : {"recon/hull.ply", "recon/mesh.ply"}) {
           const std::vector<PassAgreement> agreement =
               TrueSilhouetteAgreement(ReadMesh(from / file), folder, session);
