@@ -61,8 +61,11 @@ class DepthBuffer {
     }
   }
 
-  // Whether the surface point is the nearest thing the camera sees along its ray.
-  bool Visible(const Eigen::Vector3d& point_world) const {
+  // Whether the surface point (on a face seen at `cosine`) is the nearest thing the camera sees
+  // along its ray. The tolerance is what the face's own depth changes over the 3 x 3 pixels
+  // searched (its footprint over the cosine) plus 1 mm: a layer a few millimetres under another
+  // (a thin wall's lining, a label's edge) stays hidden.
+  bool Visible(const Eigen::Vector3d& point_world, double cosine) const {
     const Eigen::Vector3d c = camera_.cam_from_world * point_world;
     if (c.z() <= 1e-6) return false;
     const Eigen::Vector2d px = camera_.ProjectFromCam(c);
@@ -78,7 +81,8 @@ class DepthBuffer {
         if (xx >= 0 && yy >= 0 && xx < depth_.cols && yy < depth_.rows)
           nearest = std::min(nearest, depth_.at<float>(yy, xx));
       }
-    const double tolerance = 0.003 + 0.004 * c.z();
+    const double footprint = c.z() / camera_.fx;  // metres per buffer pixel
+    const double tolerance = 0.001 + 2.0 * footprint / std::max(cosine, 0.25);
     return c.z() <= nearest + tolerance || nearest == std::numeric_limits<float>::max();
   }
 
@@ -120,7 +124,7 @@ ViewMeasures MeasureViews(const std::vector<FaceData>& faces, const std::vector<
         int seen = 0, inside = 0;
         for (const auto& b : kSamples) {
           const Eigen::Vector3d p = At(face, b);
-          if (depth.Visible(p)) ++seen;
+          if (depth.Visible(p, c)) ++seen;
           if (options.correction) {
             const auto px = camera.Project(p);
             if (px) {
