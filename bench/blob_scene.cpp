@@ -13,6 +13,7 @@
 #include <Eigen/Geometry>
 #include <opencv2/imgproc.hpp>
 
+#include "albedo_score.h"
 #include "carousel/core/camera_model.h"
 #include "carousel/core/mesh.h"
 #include "carousel/core/mesh_primitives.h"
@@ -100,20 +101,6 @@ cv::Vec3d Albedo(const Eigen::Vector3d& p, std::uint64_t seed) {
   return clamped;
 }
 
-// A face's corners and UVs (corner k at its k-th halfedge's target).
-void Corners(const Mesh& mesh, Mesh::FaceHandle f, std::array<Eigen::Vector3d, 3>* p,
-             std::array<Eigen::Vector2d, 3>* uv) {
-  int k = 0;
-  for (const auto h : mesh.fh_range(f)) {
-    if (k == 3) break;
-    const auto& q = mesh.point(mesh.to_vertex_handle(h));
-    (*p)[k] = Eigen::Vector3d(q[0], q[1], q[2]);
-    const auto t = mesh.uv(h);
-    (*uv)[k] = Eigen::Vector2d(t[0], t[1]);
-    ++k;
-  }
-}
-
 // Push-pull: every texel without colour (weight 0) takes the mean of its coloured
 // surroundings at the finest scale that has some. `colour` premultiplied by `weight` in, plain
 // out (weights all 1).
@@ -147,7 +134,7 @@ cv::Mat BakeAlbedo(const Mesh& mesh, int size, std::uint64_t seed) {
   for (const auto f : mesh.faces()) {
     std::array<Eigen::Vector3d, 3> p;
     std::array<Eigen::Vector2d, 3> uv;
-    Corners(mesh, f, &p, &uv);
+    FaceCorners(mesh, f, &p, &uv);
     std::array<Eigen::Vector2d, 3> t;
     for (int k = 0; k < 3; ++k)
       t[k] = Eigen::Vector2d(uv[k].x() * size - 0.5, (1.0 - uv[k].y()) * size - 0.5);
@@ -171,7 +158,7 @@ sim::Scene AlbedoScene(const Mesh& mesh, std::uint64_t seed) {
   for (const auto f : mesh.faces()) {
     std::array<Eigen::Vector3d, 3> p;
     std::array<Eigen::Vector2d, 3> uv;
-    Corners(mesh, f, &p, &uv);
+    FaceCorners(mesh, f, &p, &uv);
     const Eigen::Vector3f normal = (p[1] - p[0]).cross(p[2] - p[0]).normalized().cast<float>();
     const int first = static_cast<int>(scene.positions.size());
     for (int k = 0; k < 3; ++k) {
@@ -255,13 +242,12 @@ double ScorePsnr(const Mesh& mesh, const cv::Mat& texture, std::uint64_t seed) {
   std::vector<double> cumulative;
   double total = 0.0;
   for (const auto f : mesh.faces()) {
-    Corners(mesh, f, &p[f.idx()], &uv[f.idx()]);
+    FaceCorners(mesh, f, &p[f.idx()], &uv[f.idx()]);
     const auto& q = p[f.idx()];
     total += 0.5 * (q[1] - q[0]).cross(q[2] - q[0]).norm();
     cumulative.push_back(total);
   }
-  double ta[3] = {0, 0, 0}, tt[3] = {0, 0, 0}, aa[3] = {0, 0, 0};
-  const int size = texture.cols;
+  GainCompensatedPsnr psnr;
   for (int i = 0; i < kPoints; ++i) {
     const double pick = Hash01(i, 1, 0, seed) * total;
     const auto f = static_cast<std::size_t>(std::min<std::ptrdiff_t>(
@@ -273,23 +259,9 @@ double ScorePsnr(const Mesh& mesh, const cv::Mat& texture, std::uint64_t seed) {
     const double b[3] = {1.0 - r1, r1 * (1.0 - r2), r1 * r2};
     const Eigen::Vector3d point = b[0] * p[f][0] + b[1] * p[f][1] + b[2] * p[f][2];
     const Eigen::Vector2d t = b[0] * uv[f][0] + b[1] * uv[f][1] + b[2] * uv[f][2];
-    cv::Mat pixel;
-    cv::getRectSubPix(texture, {1, 1},
-                      cv::Point2f(static_cast<float>(t.x() * size - 0.5),
-                                  static_cast<float>((1.0 - t.y()) * size - 0.5)),
-                      pixel, CV_32F);
-    const cv::Vec3f ours = pixel.at<cv::Vec3f>(0, 0);
-    const cv::Vec3d truth = Albedo(point, seed);
-    for (int k = 0; k < 3; ++k) {
-      ta[k] += ours[k] * truth[k];
-      tt[k] += static_cast<double>(ours[k]) * ours[k];
-      aa[k] += truth[k] * truth[k];
-    }
+    psnr.Add(SampleAtlas(texture, t), Albedo(point, seed));
   }
-  double sse = 0.0;
-  for (int k = 0; k < 3; ++k) sse += aa[k] - (tt[k] > 0.0 ? ta[k] * ta[k] / tt[k] : 0.0);
-  const double mse = std::max(sse / (3.0 * kPoints), 1e-10);
-  return 10.0 * std::log10(255.0 * 255.0 / mse);
+  return psnr.Db();
 }
 
 // One texturing run's settings.
