@@ -52,8 +52,8 @@ double GainCompensatedPsnr::Db() const {
     sse += truth_truth_[k] -
            (ours_ours_[k] > 0.0 ? ours_truth_[k] * ours_truth_[k] / ours_ours_[k] : 0.0);
   }
-  const double mse = std::max(sse / (3.0 * static_cast<double>(std::max<std::size_t>(count_, 1))),
-                              1e-10);
+  const double mse =
+      std::max(sse / (3.0 * static_cast<double>(std::max<std::size_t>(count_, 1))), 1e-10);
   return 10.0 * std::log10(255.0 * 255.0 / mse);
 }
 
@@ -89,7 +89,8 @@ cv::Vec3d TrueColour(const sim::Scene& scene, std::size_t triangle, const Eigen:
         scene.textures[static_cast<std::size_t>(material.texture)]->levels().front();
     const Eigen::Vector3i& t = scene.triangles[triangle];
     Eigen::Vector2d uv = Eigen::Vector2d::Zero();
-    for (int k = 0; k < 3; ++k) uv += b[k] * scene.uvs[static_cast<std::size_t>(t[k])].cast<double>();
+    for (int k = 0; k < 3; ++k)
+      uv += b[k] * scene.uvs[static_cast<std::size_t>(t[k])].cast<double>();
     // Image convention, repeated; texel centres at (i + 0.5) / size.
     const double x = (uv.x() - std::floor(uv.x())) * image.cols - 0.5;
     const double y = (uv.y() - std::floor(uv.y())) * image.rows - 0.5;
