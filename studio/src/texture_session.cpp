@@ -96,6 +96,7 @@ TextureSessionResult TextureSession(const std::filesystem::path& session_folder,
   result.filled_faces = map.filled_faces;
   result.blended_texels = map.blended_texels;
   result.corrected_texels = map.corrected_texels;
+  result.occluded_texels = map.occluded_texels;
   result.inpainted_texels = map.inpainted_texels;
   result.seconds_transfer = watch.ElapsedSeconds();
 

@@ -39,6 +39,7 @@ TEST(QualityReportTest, TheSummaryCountsDenseFacesAmongTheSeenOnes) {
   map.filled_faces = 1;
   map.blended_texels = 5;
   map.corrected_texels = 6;
+  map.occluded_texels = 8;
   map.inpainted_texels = 7;
   const QualityReport r = SummarizeTexture(grouping, map);
   EXPECT_DOUBLE_EQ(r.dense_fraction, 2.0 / 3.0);  // the unseen face does not count
@@ -50,6 +51,7 @@ TEST(QualityReportTest, TheSummaryCountsDenseFacesAmongTheSeenOnes) {
   EXPECT_EQ(r.filled_faces, 1);
   EXPECT_EQ(r.blended_texels, 5);
   EXPECT_EQ(r.corrected_texels, 6);
+  EXPECT_EQ(r.occluded_texels, 8);
   EXPECT_EQ(r.inpainted_texels, 7);
   EXPECT_EQ(r.view_gains_bgr.size(), 2u);
   EXPECT_EQ(r.density_ratio, map.density_ratio);
@@ -110,8 +112,8 @@ TEST(QualityReportTest, ReportJsonHasEveryField) {
   const nlohmann::json j = QualityReportJson(Example());
   for (const char* key :
        {"faces", "views", "excluded_views", "charts", "atlas_size", "grouping", "filled_faces",
-        "blended_texels", "corrected_texels", "inpainted_texels", "texel_density", "histogram",
-        "view_gains_bgr", "options", "held_out", "seconds"})
+        "blended_texels", "corrected_texels", "occluded_texels", "inpainted_texels",
+        "texel_density", "histogram", "view_gains_bgr", "options", "held_out", "seconds"})
     EXPECT_TRUE(j.contains(key)) << key;
   EXPECT_EQ(j["faces"], 4);
   EXPECT_EQ(j["excluded_views"], nlohmann::json::array({3, 11}));

@@ -14,82 +14,75 @@
 #include "texture_map_steps.h"
 
 namespace carousel::texture {
+namespace internal {
+
+DepthBuffer::DepthBuffer(const std::vector<FaceData>& faces, const CameraModel& camera,
+                         int max_side)
+    : camera_(camera.Scaled(
+          std::min(1.0, static_cast<double>(max_side) / std::max(camera.width, camera.height)))),
+      depth_(camera_.height, camera_.width, CV_32F, cv::Scalar(std::numeric_limits<float>::max())) {
+  for (const FaceData& f : faces) {
+    std::array<Eigen::Vector2d, 3> px;
+    std::array<double, 3> z;
+    bool ok = true;
+    for (int i = 0; i < 3; ++i) {
+      const Eigen::Vector3d c = camera_.cam_from_world * f.p[i];
+      if (c.z() <= 1e-6) {
+        ok = false;
+        break;
+      }
+      px[i] = camera_.ProjectFromCam(c);
+      z[i] = c.z();
+    }
+    if (!ok) continue;
+    const double area =
+        (px[1] - px[0]).x() * (px[2] - px[0]).y() - (px[1] - px[0]).y() * (px[2] - px[0]).x();
+    if (std::abs(area) < 1e-12) continue;
+    ForEachPixelCentreIn(px, depth_.cols, depth_.rows, [&](int x, int y) {
+      const Eigen::Vector2d q(x, y);
+      const double b1 =
+          ((q - px[0]).x() * (px[2] - px[0]).y() - (q - px[0]).y() * (px[2] - px[0]).x()) / area;
+      const double b2 =
+          ((px[1] - px[0]).x() * (q - px[0]).y() - (px[1] - px[0]).y() * (q - px[0]).x()) / area;
+      const double b0 = 1.0 - b1 - b2;
+      // Perspective-correct: 1/z is linear in the image.
+      const double inv = b0 / z[0] + b1 / z[1] + b2 / z[2];
+      if (inv <= 0.0) return;
+      float& d = depth_.at<float>(y, x);
+      d = std::min(d, static_cast<float>(1.0 / inv));
+    });
+  }
+}
+
+bool DepthBuffer::Visible(const Eigen::Vector3d& point_world, double cosine) const {
+  const Eigen::Vector3d c = camera_.cam_from_world * point_world;
+  if (c.z() <= 1e-6) return false;
+  const Eigen::Vector2d px = camera_.ProjectFromCam(c);
+  const int x = static_cast<int>(std::lround(px.x()));
+  const int y = static_cast<int>(std::lround(px.y()));
+  if (x < 0 || y < 0 || x >= depth_.cols || y >= depth_.rows) return false;
+  // The nearest depth around the pixel: a point on a face edge may round onto a pixel its
+  // own face does not cover.
+  float nearest = depth_.at<float>(y, x);
+  for (int dy = -1; dy <= 1; ++dy)
+    for (int dx = -1; dx <= 1; ++dx) {
+      const int xx = x + dx, yy = y + dy;
+      if (xx >= 0 && yy >= 0 && xx < depth_.cols && yy < depth_.rows)
+        nearest = std::min(nearest, depth_.at<float>(yy, xx));
+    }
+  const double footprint = c.z() / camera_.fx;  // metres per buffer pixel
+  const double tolerance = 0.001 + 2.0 * footprint / std::max(cosine, 0.25);
+  return c.z() <= nearest + tolerance || nearest == std::numeric_limits<float>::max();
+}
+
+}  // namespace internal
+
 namespace {
 
 using internal::At;
+using internal::DepthBuffer;
 using internal::FaceData;
 using internal::kSamples;
-
-// Per-view depth buffer of the mesh (camera-frame z, metres), at a reduced resolution.
-class DepthBuffer {
- public:
-  DepthBuffer(const std::vector<FaceData>& faces, const CameraModel& camera, int max_side)
-      : camera_(camera.Scaled(
-            std::min(1.0, static_cast<double>(max_side) / std::max(camera.width, camera.height)))),
-        depth_(camera_.height, camera_.width, CV_32F,
-               cv::Scalar(std::numeric_limits<float>::max())) {
-    for (const FaceData& f : faces) {
-      std::array<Eigen::Vector2d, 3> px;
-      std::array<double, 3> z;
-      bool ok = true;
-      for (int i = 0; i < 3; ++i) {
-        const Eigen::Vector3d c = camera_.cam_from_world * f.p[i];
-        if (c.z() <= 1e-6) {
-          ok = false;
-          break;
-        }
-        px[i] = camera_.ProjectFromCam(c);
-        z[i] = c.z();
-      }
-      if (!ok) continue;
-      const double area =
-          (px[1] - px[0]).x() * (px[2] - px[0]).y() - (px[1] - px[0]).y() * (px[2] - px[0]).x();
-      if (std::abs(area) < 1e-12) continue;
-      ForEachPixelCentreIn(px, depth_.cols, depth_.rows, [&](int x, int y) {
-        const Eigen::Vector2d q(x, y);
-        const double b1 =
-            ((q - px[0]).x() * (px[2] - px[0]).y() - (q - px[0]).y() * (px[2] - px[0]).x()) / area;
-        const double b2 =
-            ((px[1] - px[0]).x() * (q - px[0]).y() - (px[1] - px[0]).y() * (q - px[0]).x()) / area;
-        const double b0 = 1.0 - b1 - b2;
-        // Perspective-correct: 1/z is linear in the image.
-        const double inv = b0 / z[0] + b1 / z[1] + b2 / z[2];
-        if (inv <= 0.0) return;
-        float& d = depth_.at<float>(y, x);
-        d = std::min(d, static_cast<float>(1.0 / inv));
-      });
-    }
-  }
-
-  // Whether the surface point (on a face seen at `cosine`) is the nearest thing the camera sees
-  // along its ray. The tolerance is what the face's own depth changes over the 3 x 3 pixels
-  // searched (its footprint over the cosine) plus 1 mm: a layer a few millimetres under another
-  // (a thin wall's lining, a label's edge) stays hidden.
-  bool Visible(const Eigen::Vector3d& point_world, double cosine) const {
-    const Eigen::Vector3d c = camera_.cam_from_world * point_world;
-    if (c.z() <= 1e-6) return false;
-    const Eigen::Vector2d px = camera_.ProjectFromCam(c);
-    const int x = static_cast<int>(std::lround(px.x()));
-    const int y = static_cast<int>(std::lround(px.y()));
-    if (x < 0 || y < 0 || x >= depth_.cols || y >= depth_.rows) return false;
-    // The nearest depth around the pixel: a point on a face edge may round onto a pixel its
-    // own face does not cover.
-    float nearest = depth_.at<float>(y, x);
-    for (int dy = -1; dy <= 1; ++dy)
-      for (int dx = -1; dx <= 1; ++dx) {
-        const int xx = x + dx, yy = y + dy;
-        if (xx >= 0 && yy >= 0 && xx < depth_.cols && yy < depth_.rows)
-          nearest = std::min(nearest, depth_.at<float>(yy, xx));
-      }
-    const double footprint = c.z() / camera_.fx;  // metres per buffer pixel
-    const double tolerance = 0.001 + 2.0 * footprint / std::max(cosine, 0.25);
-    return c.z() <= nearest + tolerance || nearest == std::numeric_limits<float>::max();
-  }
-
- private:
-  CameraModel camera_;
-  cv::Mat depth_;
-};
 
 // Per face and view (face * views + view): the cosine of the viewing angle (<= 0: not a
 // candidate), all samples visible, at least half of them visible, all samples on the mask.

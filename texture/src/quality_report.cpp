@@ -74,6 +74,7 @@ QualityReport SummarizeTexture(const GroupingResult& grouping, const TextureMap&
   report.filled_faces = map.filled_faces;
   report.blended_texels = map.blended_texels;
   report.corrected_texels = map.corrected_texels;
+  report.occluded_texels = map.occluded_texels;
   report.inpainted_texels = map.inpainted_texels;
   report.density_ratio = map.density_ratio;
   report.histogram = FacesByTexels(map.texels_per_face);
@@ -105,6 +106,7 @@ nlohmann::json QualityReportJson(const QualityReport& r) {
   report["filled_faces"] = r.filled_faces;
   report["blended_texels"] = r.blended_texels;
   report["corrected_texels"] = r.corrected_texels;
+  report["occluded_texels"] = r.occluded_texels;
   report["inpainted_texels"] = r.inpainted_texels;
   report["texel_density"] = {{"faces_with_at_least_one_texel_per_photo_pixel", r.dense_fraction},
                              {"per_face", r.density_ratio}};

@@ -73,6 +73,15 @@ const OptionTable<TransferOptions>& TransferOptions::Fields() {
                                 .min = 0,
                                 .max = 64,
                                 .advanced = true});
+    t.Add(&O::zbuffer_max_side,
+          {.name = "texel-zbuffer-max-side",
+           .help = "per-texel occlusion test: longest side of the per-view depth buffers",
+           .unit = "px",
+           .min = 64,
+           .max = 8192,
+           .special = 0,
+           .special_meaning = "off",
+           .advanced = true});
     return t;
   }();
   return table;

@@ -1,5 +1,6 @@
 // Internal: the steps of the texture map (texture_map.h), one file each, and what they share:
-//   grouping.cpp       GroupFaces: per-view visibility and masks, front views, island cleanup
+//   grouping.cpp       GroupFaces: per-view visibility and masks, front views, island cleanup;
+//                      DepthBuffer
 //   texture_map.cpp    TransferTexture: the transfer steps below, in order; the face data
 //   transfer.cpp       ViewSampler; every chart's texels from the photos (per-texel correction)
 //   gains.cpp          per-view colour gains
@@ -9,6 +10,7 @@
 #pragma once
 
 #include <array>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -53,6 +55,25 @@ double ProjectedArea(const FaceData& f, const CameraModel& camera);
 // The face's area in the atlas, as a fraction of the atlas's.
 double UvArea(const FaceData& f);
 
+// Per-view depth buffer of the mesh (camera-frame z, metres) at a reduced resolution: the
+// camera scaled so that its longer side is at most `max_side` pixels. Built in grouping.cpp;
+// the grouping tests faces' sample points with it, the transfer each texel.
+class DepthBuffer {
+ public:
+  DepthBuffer(const std::vector<FaceData>& faces, const CameraModel& camera, int max_side);
+
+  // Whether the surface point (on a face seen at `cosine`) is the nearest thing the camera sees
+  // along its ray. The tolerance is what the face's own depth changes over the 3 x 3 pixels
+  // searched (its footprint over the cosine) plus 1 mm: a layer a few millimetres under another
+  // (a thin wall's lining, a label's edge) stays hidden. Near an occluder's edge the nearest of
+  // the 3 x 3 pixels is the occluder's: points just behind the edge count as hidden.
+  bool Visible(const Eigen::Vector3d& point_world, double cosine) const;
+
+ private:
+  CameraModel camera_;
+  cv::Mat depth_;
+};
+
 // \throw InvalidArgument (no views, an invalid camera).
 void CheckViews(const std::vector<View>& views);
 
@@ -60,7 +81,8 @@ void CheckViews(const std::vector<View>& views);
 
 // The photos and eroded masks the transfer reads, loaded once: the photos of the views that
 // are some face's front view, and with correction the masks (and photos) of the views that
-// see some face; with gains, the photos of the views usable for some face too. Colours are
+// see some face; with gains, the photos of the views usable for some face too; with
+// options.zbuffer_max_side, a depth buffer of the mesh per loaded photo. Colours are
 // multiplied by the per-view gains (1 until SetGains).
 // Only the part of each photo and mask the mesh projects into is kept (a 5184x3456 photo is
 // 54 MB; the product covers a fraction of it), and the views' own cached pixels are released
@@ -75,13 +97,21 @@ class ViewSampler {
   // View v's photo at `p` (Lanczos-3; bilinear at the border), times the view's gain; false when v
   // has no photo loaded, `p` is behind the camera or outside the photo.
   bool Sample(int v, const Eigen::Vector3d& p, cv::Vec3d* colour) const;
+  // Whether view v's depth buffer shows `p` (on a face seen at `cosine`) unhidden; true
+  // without one (options.zbuffer_max_side 0, or v's photo not loaded).
+  bool Visible(int v, const Eigen::Vector3d& p, double cosine) const {
+    return !depth_[v] || depth_[v]->Visible(p, cosine);
+  }
+  // Whether v's photo is loaded (Sample can read it).
+  bool HasPhoto(int v) const { return !photos_[v].empty(); }
   void SetGains(std::vector<cv::Vec3d> gains) { gains_ = std::move(gains); }
   const std::vector<cv::Vec3d>& gains() const { return gains_; }
 
  private:
   const std::vector<View>& views_;
-  std::vector<cv::Mat> photos_;  // the part in `origins_`'s box of each photo
-  std::vector<cv::Mat> masks_;   // likewise
+  std::vector<cv::Mat> photos_;                    // the part in `origins_`'s box of each photo
+  std::vector<cv::Mat> masks_;                     // likewise
+  std::vector<std::optional<DepthBuffer>> depth_;  // of the views whose photo is loaded
   std::vector<Eigen::Vector2d> origins_;
   std::vector<cv::Vec3d> gains_;
 };
@@ -99,7 +129,8 @@ struct TransferredTexels {
 // Fills the texels of every face that has a front view from the photos (charts in parallel:
 // charts never share texels), blending across seams with options.blend and taking texels on
 // the front photo's background from other views with options.correction. Writes `map`'s
-// texture, coverage, texels_per_face, density_ratio, blended_texels and corrected_texels.
+// texture, coverage, texels_per_face, density_ratio, blended_texels, corrected_texels and
+// occluded_texels.
 // \pre map's images are size x size and zero, its per-face vectors sized and zero.
 TransferredTexels TransferCharts(const std::vector<FaceData>& faces, const std::vector<View>& views,
                                  const GroupingResult& grouping, const ViewSampler& sampler,

@@ -98,7 +98,8 @@ struct TransferInputs {
 
 struct FaceCounts {
   int blended = 0;
-  int corrected = 0;
+  int corrected = 0;  // on the front photo's background
+  int occluded = 0;   // hidden in the front photo
 };
 
 // The texels of face f (front view v) from the photos, into `map`; texels on the background
@@ -115,35 +116,64 @@ FaceCounts TransferFace(const TransferInputs& in, int f, std::vector<cv::Point>*
     t[i] = Eigen::Vector2d(face.uv[i].x() * size - 0.5, (1.0 - face.uv[i].y()) * size - 0.5);
   std::array<int, 3> seam{-1, -1, -1};
   if (in.options.blend) seam = SeamViews(in.faces, f, v, in.grouping);
-  // Other views for texels the front photo shows on the background, best angle first.
-  std::vector<std::pair<double, int>> others;
-  if (in.options.correction)
-    for (int w = 0; w < nv; ++w)
-      if (w != v && in.grouping.seen[static_cast<std::size_t>(f) * nv + w])
-        others.emplace_back(
-            -face.normal.dot((in.views[w].camera().Centre() - At(face, kSamples[0])).normalized()),
-            w);
-  std::sort(others.begin(), others.end());
+  // Other views for texels the front photo shows hidden or on the background, most frontal
+  // first: those that see the face whole (the grouping's `seen`) and, for texels hidden but on
+  // the object, those facing it whose photo is loaded (a face half under a lace in every view).
+  // A texel on the background only takes a view that sees the face whole, else it is a hole.
+  const Eigen::Vector3d middle = At(face, kSamples[0]);
+  auto cosine = [&](int w) {
+    return face.normal.dot((in.views[w].camera().Centre() - middle).normalized());
+  };
+  const double front_cosine = cosine(v);
+  struct Other {
+    double cosine;
+    int view;
+    bool seen;
+  };
+  std::vector<Other> others;
+  const bool occlusion = in.options.zbuffer_max_side > 0;
+  if (in.options.correction || occlusion)
+    for (int w = 0; w < nv; ++w) {
+      if (w == v) continue;
+      const bool seen = in.grouping.seen[static_cast<std::size_t>(f) * nv + w] != 0;
+      const double c = cosine(w);
+      if ((seen && in.options.correction) || (occlusion && c > 0.0 && in.sampler.HasPhoto(w)))
+        others.push_back({c, w, seen});
+    }
+  std::sort(others.begin(), others.end(),
+            [](const Other& a, const Other& b) { return a.cosine > b.cosine; });
   int covered = 0;
   ForEachPixelCentreWithBarycentrics(
       t, size, size, [&](int x, int y, const std::array<double, 3>& b) {
         const Eigen::Vector3d p = At(face, b);
         cv::Vec3d colour;
         int source = v;
-        if (in.options.correction && !in.sampler.OnObject(v, p)) {
+        const bool on_object = !in.options.correction || in.sampler.OnObject(v, p);
+        if (!on_object || !in.sampler.Visible(v, p, front_cosine)) {
           source = -1;
-          for (const auto& [score, w] : others)
-            if (in.sampler.OnObject(w, p)) {
-              source = w;
+          for (const Other& w : others)
+            if ((on_object || w.seen) &&
+                (!in.options.correction || in.sampler.OnObject(w.view, p)) &&
+                in.sampler.Visible(w.view, p, w.cosine)) {
+              source = w.view;
               break;
             }
+          // Hidden in every view: the front view's colour, as without the test; on the
+          // background in every view that sees the face whole: a hole, filled around.
+          if (source < 0 && on_object) source = v;
+          if (source < 0)
+            for (const Other& w : others)
+              if (w.seen && in.sampler.OnObject(w.view, p)) {
+                source = w.view;
+                break;
+              }
           if (source < 0) {
             holes->emplace_back(x, y);
             map->coverage.at<std::uint8_t>(y, x) = 255;
             ++covered;
             return;
           }
-          ++counts.corrected;
+          if (source != v) ++(on_object ? counts.occluded : counts.corrected);
         }
         if (!in.sampler.Sample(source, p, &colour)) return;
         if (source == v && BlendAcrossSeam(in.sampler, seam, b, p, in.options.correction, &colour))
@@ -190,6 +220,7 @@ ViewSampler::ViewSampler(const std::vector<FaceData>& faces, const std::vector<V
     : views_(views),
       photos_(views.size()),
       masks_(views.size()),
+      depth_(views.size()),
       origins_(views.size(), Eigen::Vector2d::Zero()),
       gains_(views.size(), cv::Vec3d(1, 1, 1)) {
   const int nv = static_cast<int>(views.size());
@@ -214,6 +245,8 @@ ViewSampler::ViewSampler(const std::vector<FaceData>& faces, const std::vector<V
         cv::erode(views[v].Mask()(box) >= 128, masks_[v],
                   cv::getStructuringElement(cv::MORPH_ELLIPSE, {5, 5}));
       views[v].ReleasePixels();
+      if (photo[v] && options.zbuffer_max_side > 0)
+        depth_[v].emplace(faces, views[v].camera(), options.zbuffer_max_side);
     }
   });
 }
@@ -254,7 +287,7 @@ TransferredTexels TransferCharts(const std::vector<FaceData>& faces, const std::
   texels.face_count.assign(nf, 0);
   texels.holes.resize(chart_faces.size());
   const TransferInputs in{faces, views, grouping, sampler, options, size};
-  std::atomic<int> blended{0}, corrected{0};
+  std::atomic<int> blended{0}, corrected{0}, occluded{0};
   std::atomic<std::size_t> charts_done{0};
   ParallelFor(chart_faces.size(), 1, 0, [&](std::size_t begin, std::size_t end) {
     for (std::size_t c = begin; c < end; ++c) {
@@ -263,12 +296,14 @@ TransferredTexels TransferCharts(const std::vector<FaceData>& faces, const std::
         const FaceCounts counts = TransferFace(in, f, &texels.holes[c], &texels, map);
         blended += counts.blended;
         corrected += counts.corrected;
+        occluded += counts.occluded;
       }
       progress.Report(++charts_done, chart_faces.size());
     }
   });
   map->blended_texels = blended.load();
   map->corrected_texels = corrected.load();
+  map->occluded_texels = occluded.load();
   return texels;
 }
 

@@ -49,6 +49,7 @@ struct TextureSessionResult {
   int filled_faces = 0;
   int blended_texels = 0;
   int corrected_texels = 0;  // from another view than their face's (background in the front)
+  int occluded_texels = 0;   // from another view than their face's (hidden in the front)
   int inpainted_texels = 0;  // background in every view: filled from the texels around
   // Fraction of faces with at least as many texels as front-photo pixels.
   double dense_fraction = 0.0;

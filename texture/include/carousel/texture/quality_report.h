@@ -5,7 +5,7 @@
 //
 // report.json fields: faces, views, excluded_views, charts, atlas_size, grouping
 // {unseen_faces, corrected_faces, uncorrectable_faces, island_faces_switched}, filled_faces,
-// blended_texels, corrected_texels, inpainted_texels, texel_density
+// blended_texels, corrected_texels, occluded_texels, inpainted_texels, texel_density
 // {faces_with_at_least_one_texel_per_photo_pixel, per_face}, histogram
 // {texels_per_face_bin_starts, faces}, view_gains_bgr, options {blend, correction, gain,
 // packing}, held_out {views [{view, psnr_db, ssim, silhouette_iou}], mean_psnr_db, mean_ssim}
@@ -62,6 +62,7 @@ struct QualityReport {
   int filled_faces = 0;
   int blended_texels = 0;
   int corrected_texels = 0;
+  int occluded_texels = 0;
   int inpainted_texels = 0;
   // Fraction of the faces some view sees that get at least one texel per front-photo pixel.
   double dense_fraction = 0.0;

@@ -10,11 +10,12 @@
 // from all their neighbours to a neighbour's image when that image is valid for them.
 //
 // Transfer works per texel: the texel's centre is mapped through its face's UV triangle to a
-// surface point, projected into the front photo with the full camera model (lens distortion
-// included) and sampled with a Lanczos-3 kernel (sharper than bilinear interpolation, whose
-// blur a viewer's own texture filtering adds to), so the texture is as sharp as the photo. Seam
-// blending follows the paper's Eq. 8 near edges between faces of different front images; per-view
-// colour gains (least squares over faces seen by several views) even out exposure
+// surface point (taken from another view where the front view's depth buffer or mask shows it
+// hidden or on the background), projected into the front photo with the full camera model (lens
+// distortion included) and sampled with a Lanczos-3 kernel (sharper than bilinear interpolation,
+// whose blur a viewer's own texture filtering adds to), so the texture is as sharp as the photo.
+// Seam blending follows the paper's Eq. 8 near edges between faces of different front images;
+// per-view colour gains (least squares over faces seen by several views) even out exposure
 // differences; the gutter is dilated so that mip-mapping does not pull in black. Faces no
 // view sees get the colour of their neighbours and are counted.
 //
@@ -101,6 +102,11 @@ struct TransferOptions {
   bool correction = true;
   // Texels the charts are grown by into the gutter (0..64).
   int dilation_texels = 8;
+  // Per-texel occlusion: the grouping sees a face whole in its front view by 7 sample points;
+  // a texel between them that the view's depth buffer shows hidden (under a lace, behind a
+  // fold) is taken from the most frontal other view that sees it, if one does. The longest
+  // side of those depth buffers, pixels (64..8192); 0: no per-texel test.
+  int zbuffer_max_side = 1600;
   // The description of every field above but `correction` (core/options.h).
   static const OptionTable<TransferOptions>& Fields();
   void Validate() const;
@@ -116,6 +122,7 @@ struct TextureMap {
   int filled_faces = 0;          // coloured from neighbours (no view sees them)
   int blended_texels = 0;
   int corrected_texels = 0;  // taken from another view than the face's (mask)
+  int occluded_texels = 0;   // taken from another view: hidden in the face's (depth buffer)
   int inpainted_texels = 0;  // on the background in every view: filled from around
   double seconds = 0.0;
 };
