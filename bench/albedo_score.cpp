@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <random>
 #include <vector>
@@ -150,9 +151,12 @@ std::vector<SurfacePoint> SampleScene(const sim::Scene& scene, int count, std::u
 }
 
 SurfaceScore ScoreAgainstScene(const sim::Scene& truth, const std::vector<SurfacePoint>& points,
-                               const Mesh& model, const cv::Mat& texture) {
+                               const Mesh& model, const cv::Mat& texture,
+                               const std::vector<cv::Vec3d>* reference) {
   CAROUSEL_THROW_IF(!model.has_uvs(), InvalidArgument, "the model to score has no UVs");
   CAROUSEL_THROW_IF(points.empty(), InvalidArgument, "no point of the true surface to score");
+  CAROUSEL_THROW_IF(reference != nullptr && reference->size() != points.size(), InvalidArgument,
+                    "not one reference colour per point");
   std::vector<TriangleTree::Triangle> triangles;
   std::vector<std::array<Eigen::Vector2d, 3>> uvs;
   for (const auto f : model.faces()) {
@@ -165,9 +169,13 @@ SurfaceScore ScoreAgainstScene(const sim::Scene& truth, const std::vector<Surfac
   const TriangleTree tree(triangles);
   constexpr double kSideTolerance = 5e-4;  // metres
   GainCompensatedPsnr psnr;
-  std::vector<double> distances;
+  const std::vector<double> band_edges = {0.0, 0.05, 0.1, 0.2, 0.4, 0.8, 1e9};  // mm
+  std::vector<GainCompensatedPsnr> band_psnr(band_edges.size() - 1),
+      band_reference(band_edges.size() - 1);
+  std::vector<double> distances, errors;
   std::vector<std::size_t> candidates;
-  for (const SurfacePoint& point : points) {
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const SurfacePoint& point = points[i];
     TriangleTree::Hit hit = tree.ClosestPoint(point.point);
     // A thin shell's two sides (or a sheet modelled twice, once per side) are both about as
     // close: the side facing the way the true surface does is the one seen with it.
@@ -190,13 +198,35 @@ SurfaceScore ScoreAgainstScene(const sim::Scene& truth, const std::vector<Surfac
     const TriangleTree::Triangle& on = tree.triangles()[hit.triangle];
     const Eigen::Vector3d w = Barycentrics(hit.point, on.a, on.b, on.c);
     const auto& uv = uvs[hit.triangle];
-    psnr.Add(SampleAtlas(texture, w[0] * uv[0] + w[1] * uv[1] + w[2] * uv[2]),
-             TrueColour(truth, point.triangle, point.barycentrics));
+    const cv::Vec3d ours = SampleAtlas(texture, w[0] * uv[0] + w[1] * uv[1] + w[2] * uv[2]);
+    const cv::Vec3d expected = TrueColour(truth, point.triangle, point.barycentrics);
+    psnr.Add(ours, expected);
+    const double mm = 1000.0 * hit.distance;
+    for (std::size_t b = 0; b + 1 < band_edges.size(); ++b) {
+      if (mm < band_edges[b] || mm >= band_edges[b + 1]) continue;
+      band_psnr[b].Add(ours, expected);
+      if (reference != nullptr) band_reference[b].Add((*reference)[i], expected);
+    }
+    errors.push_back(cv::norm(ours - expected, cv::NORM_L2SQR));
     distances.push_back(hit.distance);
   }
   SurfaceScore score;
   score.points = distances.size();
   score.psnr_db = psnr.Db();
+  for (std::size_t b = 0; b < band_psnr.size(); ++b) {
+    if (band_psnr[b].count() == 0) continue;
+    score.bands.push_back({band_edges[b], band_edges[b + 1], band_psnr[b].count(),
+                           band_psnr[b].Db(),
+                           band_reference[b].count() > 0 ? band_reference[b].Db() : 0.0});
+  }
+  double total_error = 0.0;
+  for (const double e : errors) total_error += e;
+  const std::size_t worst = std::max<std::size_t>(errors.size() / 100, 1);
+  std::nth_element(errors.begin(), errors.begin() + static_cast<std::ptrdiff_t>(worst),
+                   errors.end(), std::greater<>());
+  double worst_error = 0.0;
+  for (std::size_t i = 0; i < worst; ++i) worst_error += errors[i];
+  score.worst_percent_error_share = total_error > 0.0 ? worst_error / total_error : 0.0;
   double sum = 0.0;
   for (const double d : distances) sum += d;
   score.mean_distance_mm = 1000.0 * sum / static_cast<double>(distances.size());

@@ -61,13 +61,26 @@ struct SurfaceScore {
   std::size_t points = 0;
   double mean_distance_mm = 0.0;  // from the true surface to the model
   double p95_distance_mm = 0.0;
+  // The same score over the points at a distance from the model in [from, to) mm: where the
+  // geometry is off, a photo's colour lands beside the point it belongs to.
+  struct Band {
+    double from_mm = 0.0, to_mm = 0.0;
+    std::size_t points = 0;
+    double psnr_db = 0.0;
+    double reference_db = 0.0;  // of the reference colours at the same points, if given
+  };
+  std::vector<Band> bands;
+  double worst_percent_error_share = 0.0;  // of the squared error, in the worst 1 % of points
 };
 
 // Each of `points` (of `truth`'s surface) is matched to the closest point of `model` (with
 // UVs) on a face turned the same way (among those within 0.5 mm of the closest), whose
-// `texture` is sampled there and compared with the true colour. 	hrow
-// InvalidArgument if the model has no UVs or `points` is empty.
+// `texture` is sampled there and compared with the true colour. `reference`, if given, holds
+// one colour per point (e.g. the photos' own), scored by band beside the model.
+// \throw InvalidArgument if the model has no UVs, `points` is empty or `reference` is not one
+// colour per point.
 SurfaceScore ScoreAgainstScene(const sim::Scene& truth, const std::vector<SurfacePoint>& points,
-                               const Mesh& model, const cv::Mat& texture);
+                               const Mesh& model, const cv::Mat& texture,
+                               const std::vector<cv::Vec3d>* reference = nullptr);
 
 }  // namespace carousel::bench

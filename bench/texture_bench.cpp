@@ -82,6 +82,7 @@ std::filesystem::path GivenMeshSession(const std::filesystem::path& session, int
 // there (each point's colour in the photo that sees it most frontally, bilinear).
 struct SeenPoints {
   std::vector<bench::SurfacePoint> points;
+  std::vector<cv::Vec3d> photo_colours;  // per point
   double photos_db = 0.0;
 };
 
@@ -139,6 +140,7 @@ SeenPoints FindSeenPoints(const std::filesystem::path& session_folder, const sim
       photos.Add({c[0], c[1], c[2]},
                  bench::TrueColour(truth, points[i].triangle, points[i].barycentrics));
       seen.points.push_back(points[i]);
+      seen.photo_colours.emplace_back(c[0], c[1], c[2]);
     }
   }
   if (photos.count() > 0) seen.photos_db = photos.Db();
@@ -155,8 +157,8 @@ struct TruthScores {
 // (x, z, -y)) scored at `points` of the true surface, and rendered into four of the views that
 // made it (the texture's own photos: what it reproduces of them, over their exact masks).
 TruthScores ScoreAgainstTruth(const std::filesystem::path& session_folder, const sim::Scene& truth,
-                              const std::vector<bench::SurfacePoint>& points,
-                              const texture::ExportResult& files, const std::vector<int>& exclude) {
+                              const SeenPoints& seen, const texture::ExportResult& files,
+                              const std::vector<int>& exclude) {
   Mesh model = ReadMesh(files.obj);
   for (const auto v : model.vertices()) {
     const Mesh::Point q = model.point(v);
@@ -164,7 +166,8 @@ TruthScores ScoreAgainstTruth(const std::filesystem::path& session_folder, const
   }
   const cv::Mat texture = ReadImage(files.texture);
   TruthScores scores;
-  scores.surface = bench::ScoreAgainstScene(truth, points, model, texture);
+  scores.surface =
+      bench::ScoreAgainstScene(truth, seen.points, model, texture, &seen.photo_colours);
   const texture::TexturedModel textured = texture::TexturedModelFromMesh(model, texture);
   const studio::Session session = studio::ReadSession(session_folder);
   std::vector<texture::HeldOutScore> reprojected;
@@ -192,6 +195,8 @@ int Run(int argc, char** argv) {
   int given_faces = 0;
   bool unlit = false, clean = false, blob = false;
   bench::BlobSceneOptions blob_options;
+  texture::GroupingOptions grouping;
+  texture::TransferOptions transfer;
   BenchFlags flags(argc, argv, "texture_bench: the texture stage of a simulated session, timed");
   flags.Option("--scene", &scene, "shoe, bottle, avocado, duck")
       .Option("--width", &width)
@@ -210,7 +215,11 @@ int Run(int argc, char** argv) {
       .Option("--blob-seeds", &blob_options.seeds, "blobs 1..N")
       .Flag("--no-blend", &no_blend)
       .Flag("--no-correction", &no_correction)
-      .Flag("--no-gain", &no_gain);
+      .Flag("--no-gain", &no_gain)
+      .Option("--seam-cost", &grouping.seam_cost, "coherent front views (texture_map.h)")
+      .Option("--min-cosine-ratio", &grouping.min_cosine_ratio)
+      .Option("--zbuffer-max-side", &grouping.zbuffer_max_side)
+      .Option("--texel-zbuffer-max-side", &transfer.zbuffer_max_side, "0 = no per-texel test");
   if (const std::optional<int> exit_code = flags.Parse(std::cout, std::cerr)) return *exit_code;
   if (blob) return bench::RunBlobScene(blob_options);
   const bool blend = !no_blend, correction = !no_correction, gain = !no_gain;
@@ -250,9 +259,11 @@ int Run(int argc, char** argv) {
     SeenPoints seen;
     for (const int size : sizes) {
       studio::TextureSessionOptions options;
+      options.grouping = grouping;
       options.atlas.size.size = size;
       options.grouping.exclude_views = exclude;
       options.grouping.correction = correction;
+      options.transfer = transfer;
       options.transfer.blend = blend;
       options.transfer.gain = gain;
       const studio::TextureSessionResult t = studio::TextureSession(session, options, progress);
@@ -271,11 +282,11 @@ int Run(int argc, char** argv) {
       for (std::size_t i = 0; i < t.histogram_counts.size(); ++i)
         std::printf(" [%d..] %d", t.histogram_edges[i], t.histogram_counts[i]);
       std::printf(
-          "\n  grouping: %d moved off the background, %d unseen (filled); %d texels from other "
-          "views, "
-          "%d inpainted, %d blended\n",
+          "\n  grouping: %d moved off the background, %d unseen (filled); texels from other "
+          "views: %d (background in the front one), %d (hidden in it); %d inpainted, %d "
+          "blended\n",
           t.grouping.corrected_faces, t.grouping.unseen_faces, t.corrected_texels,
-          t.inpainted_texels, t.blended_texels);
+          t.occluded_texels, t.inpainted_texels, t.blended_texels);
       if (!t.held_out.empty())
         std::printf("  held out: PSNR %.2f dB, SSIM %.4f\n", t.mean_psnr_db, t.mean_ssim);
       rusage usage{};
@@ -289,7 +300,7 @@ int Run(int argc, char** argv) {
           seen =
               FindSeenPoints(session, truth, bench::SampleScene(truth, kScorePoints, 1), exclude);
         }
-        const TruthScores scores = ScoreAgainstTruth(session, truth, seen.points, t.files, exclude);
+        const TruthScores scores = ScoreAgainstTruth(session, truth, seen, t.files, exclude);
         const bench::SurfaceScore& s = scores.surface;
         std::printf(
             "  vs the true albedo: PSNR %.2f dB (gain-compensated) at %zu of %d points of the "
@@ -297,6 +308,13 @@ int Run(int argc, char** argv) {
             "%.3f mm from them on average, 95 %% within %.3f mm\n",
             s.psnr_db, s.points, kScorePoints, seen.photos_db, s.mean_distance_mm,
             s.p95_distance_mm);
+        std::printf("    by distance from the model (mm: points, texture dB / photos dB):");
+        for (const auto& band : s.bands) {
+          std::printf(" [%g, %g) %zu %.2f/%.2f;", band.from_mm, band.to_mm, band.points,
+                      band.psnr_db, band.reference_db);
+        }
+        std::printf(" the worst 1 %% of points hold %.0f %% of the squared error\n",
+                    100.0 * s.worst_percent_error_share);
         std::printf("  rendered into its own photos (views");
         for (const int v : scores.reprojected_views) std::printf(" %d", v);
         std::printf("): PSNR %.2f dB (scoring %.1f s)\n", scores.reprojected_db,
