@@ -94,7 +94,7 @@ cv::Vec3b TexelAt(const Mesh& mesh, const cv::Mat& texture, int f, const Eigen::
 // colour; without it they show the occluder.
 TEST(TransferTest, TexelsHiddenInTheFrontViewComeFromAViewThatSeesThem) {
   Mesh mesh;
-  AddSquare(&mesh, 0.10, {0.0, 0.0, 0.0});              // faces 0, 1
+  AddSquare(&mesh, 0.10, {0.0, 0.0, 0.0});               // faces 0, 1
   const Eigen::Vector3d occluder(0.026, -0.0229, 0.02);  // over face 0, off its sample points
   AddSquare(&mesh, 0.008, occluder);                     // faces 2, 3
   AtlasOptions atlas;
@@ -104,7 +104,8 @@ TEST(TransferTest, TexelsHiddenInTheFrontViewComeFromAViewThatSeesThem) {
   const CameraModel above = CameraAt({0.0, 0.0, 0.5});
   const std::vector<View> views = {
       Photograph(mesh, above),
-      Photograph(mesh, CameraAt({-0.5 * std::sin(std::numbers::pi / 6), 0.0, 0.5 * std::cos(std::numbers::pi / 6)}))};
+      Photograph(mesh, CameraAt({-0.5 * std::sin(std::numbers::pi / 6), 0.0,
+                                 0.5 * std::cos(std::numbers::pi / 6)}))};
   const GroupingResult grouping = GroupFaces(mesh, views, {}, progress);
   ASSERT_EQ(grouping.front_view[0], 0);  // the part hidden is between its sample points
 

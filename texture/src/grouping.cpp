@@ -6,6 +6,9 @@
 #include <limits>
 #include <map>
 
+#include <Eigen/Geometry>
+#include <opencv2/imgproc.hpp>
+
 #include "carousel/core/error.h"
 #include "carousel/core/parallel.h"
 #include "carousel/core/raster.h"
@@ -20,21 +23,45 @@ DepthBuffer::DepthBuffer(const std::vector<FaceData>& faces, const CameraModel& 
                          int max_side)
     : camera_(camera.Scaled(
           std::min(1.0, static_cast<double>(max_side) / std::max(camera.width, camera.height)))),
-      depth_(camera_.height, camera_.width, CV_32F, cv::Scalar(std::numeric_limits<float>::max())) {
-  for (const FaceData& f : faces) {
+      scale_(static_cast<double>(camera_.width) / camera.width,
+             static_cast<double>(camera_.height) / camera.height) {
+  struct Projected {
     std::array<Eigen::Vector2d, 3> px;
     std::array<double, 3> z;
+  };
+  std::vector<Projected> projected;
+  projected.reserve(faces.size());
+  Eigen::AlignedBox2d box;
+  for (const FaceData& f : faces) {
+    Projected p;
     bool ok = true;
-    for (int i = 0; i < 3; ++i) {
+    for (int i = 0; i < 3 && ok; ++i) {
       const Eigen::Vector3d c = camera_.cam_from_world * f.p[i];
-      if (c.z() <= 1e-6) {
-        ok = false;
-        break;
-      }
-      px[i] = camera_.ProjectFromCam(c);
-      z[i] = c.z();
+      ok = c.z() > 1e-6;
+      if (!ok) break;
+      p.px[i] = camera_.ProjectFromCam(c);
+      p.z[i] = c.z();
+      box.extend(p.px[i]);
     }
-    if (!ok) continue;
+    if (ok) projected.push_back(p);
+  }
+  // Only the part of the image the mesh covers (and a pixel around, for the 3 x 3 search): a
+  // product fills a fraction of the frame.
+  const cv::Rect image(0, 0, camera_.width, camera_.height);
+  const cv::Rect covered =
+      box.isEmpty() ? cv::Rect()
+                    : cv::Rect(cv::Point(static_cast<int>(std::floor(box.min().x())) - 1,
+                                         static_cast<int>(std::floor(box.min().y())) - 1),
+                               cv::Point(static_cast<int>(std::ceil(box.max().x())) + 2,
+                                         static_cast<int>(std::ceil(box.max().y())) + 2)) &
+                          image;
+  origin_ = Eigen::Vector2d(covered.x, covered.y);
+  depth_ = cv::Mat(std::max(covered.height, 1), std::max(covered.width, 1), CV_32F,
+                   cv::Scalar(std::numeric_limits<float>::max()));
+  for (Projected& p : projected) {
+    for (Eigen::Vector2d& q : p.px) q -= origin_;
+    const auto& px = p.px;
+    const auto& z = p.z;
     const double area =
         (px[1] - px[0]).x() * (px[2] - px[0]).y() - (px[1] - px[0]).y() * (px[2] - px[0]).x();
     if (std::abs(area) < 1e-12) continue;
@@ -52,27 +79,34 @@ DepthBuffer::DepthBuffer(const std::vector<FaceData>& faces, const CameraModel& 
       d = std::min(d, static_cast<float>(1.0 / inv));
     });
   }
+  // Each pixel keeps the nearest depth of the 3 x 3 around it (outside counts as empty): a
+  // point on a face edge may round onto a pixel its own face does not cover.
+  cv::erode(depth_, depth_, cv::Mat(), cv::Point(-1, -1), 1, cv::BORDER_CONSTANT,
+            cv::Scalar(std::numeric_limits<float>::max()));
 }
 
 bool DepthBuffer::Visible(const Eigen::Vector3d& point_world, double cosine) const {
   const Eigen::Vector3d c = camera_.cam_from_world * point_world;
   if (c.z() <= 1e-6) return false;
-  const Eigen::Vector2d px = camera_.ProjectFromCam(c);
+  return VisibleInBuffer(camera_.ProjectFromCam(c), c.z(), cosine);
+}
+
+bool DepthBuffer::VisibleAt(const Eigen::Vector2d& photo_px, double z, double cosine) const {
+  if (z <= 1e-6) return false;
+  // CameraModel::Scaled: pixel edges scale, centres sit half a pixel inside them.
+  return VisibleInBuffer((photo_px.array() + 0.5) * scale_.array() - 0.5, z, cosine);
+}
+
+bool DepthBuffer::VisibleInBuffer(const Eigen::Vector2d& px, double z, double cosine) const {
   const int x = static_cast<int>(std::lround(px.x()));
   const int y = static_cast<int>(std::lround(px.y()));
-  if (x < 0 || y < 0 || x >= depth_.cols || y >= depth_.rows) return false;
-  // The nearest depth around the pixel: a point on a face edge may round onto a pixel its
-  // own face does not cover.
-  float nearest = depth_.at<float>(y, x);
-  for (int dy = -1; dy <= 1; ++dy)
-    for (int dx = -1; dx <= 1; ++dx) {
-      const int xx = x + dx, yy = y + dy;
-      if (xx >= 0 && yy >= 0 && xx < depth_.cols && yy < depth_.rows)
-        nearest = std::min(nearest, depth_.at<float>(yy, xx));
-    }
-  const double footprint = c.z() / camera_.fx;  // metres per buffer pixel
+  if (x < 0 || y < 0 || x >= camera_.width || y >= camera_.height) return false;
+  const int bx = x - static_cast<int>(origin_.x()), by = y - static_cast<int>(origin_.y());
+  if (bx < 0 || by < 0 || bx >= depth_.cols || by >= depth_.rows) return true;  // nothing there
+  const float nearest = depth_.at<float>(by, bx);  // of the 3 x 3 around (the constructor)
+  const double footprint = z / camera_.fx;         // metres per buffer pixel
   const double tolerance = 0.001 + 2.0 * footprint / std::max(cosine, 0.25);
-  return c.z() <= nearest + tolerance || nearest == std::numeric_limits<float>::max();
+  return z <= nearest + tolerance || nearest == std::numeric_limits<float>::max();
 }
 
 }  // namespace internal

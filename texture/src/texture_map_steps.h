@@ -68,10 +68,16 @@ class DepthBuffer {
   // (a thin wall's lining, a label's edge) stays hidden. Near an occluder's edge the nearest of
   // the 3 x 3 pixels is the occluder's: points just behind the edge count as hidden.
   bool Visible(const Eigen::Vector3d& point_world, double cosine) const;
+  // The same for a point already projected: at `photo_px` in the full-size photo (pixel
+  // centres at integers), camera-frame depth `z`.
+  bool VisibleAt(const Eigen::Vector2d& photo_px, double z, double cosine) const;
 
  private:
+  bool VisibleInBuffer(const Eigen::Vector2d& px, double z, double cosine) const;
   CameraModel camera_;
-  cv::Mat depth_;
+  Eigen::Vector2d scale_;                             // buffer pixels per photo pixel, x and y
+  Eigen::Vector2d origin_ = Eigen::Vector2d::Zero();  // of depth_ in the scaled image
+  cv::Mat depth_;  // CV_32F: the part of the scaled image the mesh covers
 };
 
 // \throw InvalidArgument (no views, an invalid camera).
@@ -92,15 +98,24 @@ class ViewSampler {
   // \throw IoError/FormatError naming a photo or mask.
   ViewSampler(const std::vector<FaceData>& faces, const std::vector<View>& views,
               const GroupingResult& grouping, const TransferOptions& options);
-  // Whether `p` (world) falls on view v's object (its eroded mask; true without a mask).
+  // A world point seen from view v: projected once (lens included), then tested and sampled.
+  struct Located {
+    Eigen::Vector2d px;  // in the full photo, pixel centres at integers
+    double z = 0.0;      // camera-frame depth, metres
+  };
+  // Empty when `p` is behind view v's camera.
+  std::optional<Located> Locate(int v, const Eigen::Vector3d& p) const;
+  // Whether the point falls on view v's object (its eroded mask; true without a mask).
+  bool OnObject(int v, const Located& at) const;
   bool OnObject(int v, const Eigen::Vector3d& p) const;
-  // View v's photo at `p` (Lanczos-3; bilinear at the border), times the view's gain; false when v
-  // has no photo loaded, `p` is behind the camera or outside the photo.
+  // View v's photo at the point (Lanczos-3; bilinear at the border), times the view's gain;
+  // false when v has no photo loaded, or the point is behind the camera or outside the photo.
+  bool Sample(int v, const Located& at, cv::Vec3d* colour) const;
   bool Sample(int v, const Eigen::Vector3d& p, cv::Vec3d* colour) const;
-  // Whether view v's depth buffer shows `p` (on a face seen at `cosine`) unhidden; true
+  // Whether view v's depth buffer shows the point (on a face seen at `cosine`) unhidden; true
   // without one (options.zbuffer_max_side 0, or v's photo not loaded).
-  bool Visible(int v, const Eigen::Vector3d& p, double cosine) const {
-    return !depth_[v] || depth_[v]->Visible(p, cosine);
+  bool Visible(int v, const Located& at, double cosine) const {
+    return !depth_[v] || depth_[v]->VisibleAt(at.px, at.z, cosine);
   }
   // Whether v's photo is loaded (Sample can read it).
   bool HasPhoto(int v) const { return !photos_[v].empty(); }

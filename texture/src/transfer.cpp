@@ -146,27 +146,35 @@ FaceCounts TransferFace(const TransferInputs& in, int f, std::vector<cv::Point>*
   ForEachPixelCentreWithBarycentrics(
       t, size, size, [&](int x, int y, const std::array<double, 3>& b) {
         const Eigen::Vector3d p = At(face, b);
-        cv::Vec3d colour;
+        const std::optional<ViewSampler::Located> front = in.sampler.Locate(v, p);
+        if (!front) return;
+        ViewSampler::Located at = *front;
         int source = v;
-        const bool on_object = !in.options.correction || in.sampler.OnObject(v, p);
-        if (!on_object || !in.sampler.Visible(v, p, front_cosine)) {
+        const bool on_object = !in.options.correction || in.sampler.OnObject(v, at);
+        if (!on_object || !in.sampler.Visible(v, at, front_cosine)) {
           source = -1;
-          for (const Other& w : others)
-            if ((on_object || w.seen) &&
-                (!in.options.correction || in.sampler.OnObject(w.view, p)) &&
-                in.sampler.Visible(w.view, p, w.cosine)) {
+          for (const Other& w : others) {
+            if (!on_object && !w.seen) continue;
+            const std::optional<ViewSampler::Located> there = in.sampler.Locate(w.view, p);
+            if (there && (!in.options.correction || in.sampler.OnObject(w.view, *there)) &&
+                in.sampler.Visible(w.view, *there, w.cosine)) {
               source = w.view;
+              at = *there;
               break;
             }
+          }
           // Hidden in every view: the front view's colour, as without the test; on the
           // background in every view that sees the face whole: a hole, filled around.
           if (source < 0 && on_object) source = v;
           if (source < 0)
-            for (const Other& w : others)
-              if (w.seen && in.sampler.OnObject(w.view, p)) {
+            for (const Other& w : others) {
+              const std::optional<ViewSampler::Located> there = in.sampler.Locate(w.view, p);
+              if (w.seen && there && in.sampler.OnObject(w.view, *there)) {
                 source = w.view;
+                at = *there;
                 break;
               }
+            }
           if (source < 0) {
             holes->emplace_back(x, y);
             map->coverage.at<std::uint8_t>(y, x) = 255;
@@ -175,7 +183,8 @@ FaceCounts TransferFace(const TransferInputs& in, int f, std::vector<cv::Point>*
           }
           if (source != v) ++(on_object ? counts.occluded : counts.corrected);
         }
-        if (!in.sampler.Sample(source, p, &colour)) return;
+        cv::Vec3d colour;
+        if (!in.sampler.Sample(source, at, &colour)) return;
         if (source == v && BlendAcrossSeam(in.sampler, seam, b, p, in.options.correction, &colour))
           ++counts.blended;
         map->texture.at<cv::Vec3b>(y, x) = cv::Vec3b(cv::saturate_cast<std::uint8_t>(colour[0]),
@@ -251,11 +260,21 @@ ViewSampler::ViewSampler(const std::vector<FaceData>& faces, const std::vector<V
   });
 }
 
+std::optional<ViewSampler::Located> ViewSampler::Locate(int v, const Eigen::Vector3d& p) const {
+  const Eigen::Vector3d c = views_[v].camera().cam_from_world * p;
+  if (c.z() <= 1e-6) return std::nullopt;
+  return Located{views_[v].camera().ProjectFromCam(c), c.z()};
+}
+
 bool ViewSampler::OnObject(int v, const Eigen::Vector3d& p) const {
   if (masks_[v].empty()) return true;
-  const Eigen::Vector3d c = views_[v].camera().cam_from_world * p;
-  if (c.z() <= 1e-6) return false;
-  const Eigen::Vector2d px = views_[v].camera().ProjectFromCam(c) - origins_[v];
+  const std::optional<Located> at = Locate(v, p);
+  return at && OnObject(v, *at);
+}
+
+bool ViewSampler::OnObject(int v, const Located& at) const {
+  if (masks_[v].empty()) return true;
+  const Eigen::Vector2d px = at.px - origins_[v];
   const int x = static_cast<int>(std::lround(px.x())), y = static_cast<int>(std::lround(px.y()));
   return x >= 0 && y >= 0 && x < masks_[v].cols && y < masks_[v].rows &&
          masks_[v].at<std::uint8_t>(y, x) >= 128;
@@ -263,10 +282,13 @@ bool ViewSampler::OnObject(int v, const Eigen::Vector3d& p) const {
 
 bool ViewSampler::Sample(int v, const Eigen::Vector3d& p, cv::Vec3d* colour) const {
   if (photos_[v].empty()) return false;
-  const Eigen::Vector3d c = views_[v].camera().cam_from_world * p;
-  if (c.z() <= 1e-6) return false;
-  if (!SampleLanczos(photos_[v], views_[v].camera().ProjectFromCam(c) - origins_[v], colour))
-    return false;
+  const std::optional<Located> at = Locate(v, p);
+  return at && Sample(v, *at, colour);
+}
+
+bool ViewSampler::Sample(int v, const Located& at, cv::Vec3d* colour) const {
+  if (photos_[v].empty()) return false;
+  if (!SampleLanczos(photos_[v], at.px - origins_[v], colour)) return false;
   for (int k = 0; k < 3; ++k) (*colour)[k] *= gains_[v][k];
   return true;
 }
