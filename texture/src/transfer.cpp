@@ -168,8 +168,9 @@ FaceCounts TransferFace(const TransferInputs& in, int f, std::vector<cv::Point>*
           if (source < 0 && on_object) source = v;
           if (source < 0)
             for (const Other& w : others) {
+              if (!w.seen) continue;
               const std::optional<ViewSampler::Located> there = in.sampler.Locate(w.view, p);
-              if (w.seen && there && in.sampler.OnObject(w.view, *there)) {
+              if (there && in.sampler.OnObject(w.view, *there)) {
                 source = w.view;
                 at = *there;
                 break;
