@@ -11,6 +11,7 @@
 #include "carousel/core/progress.h"
 #include "carousel/core/view.h"
 #include "carousel/texture/texture_map.h"
+#include "test_camera.h"
 
 namespace carousel::texture {
 namespace {
@@ -26,14 +27,7 @@ void AddSquare(Mesh* mesh, double side, double z) {
 
 // A camera `distance` metres above the origin looking straight down, 1600 x 1200.
 View CameraAbove(double distance) {
-  CameraModel camera;
-  camera.width = 1600;
-  camera.height = 1200;
-  camera.fx = camera.fy = 2000.0;
-  camera.cx = 799.5;
-  camera.cy = 599.5;
-  const Eigen::Matrix3d down = Eigen::Vector3d(1.0, -1.0, -1.0).asDiagonal();  // camera z = -Z
-  camera.cam_from_world = Rigid3d(down, Eigen::Vector3d(0.0, 0.0, distance));
+  const CameraModel camera = test_support::CameraLookingAtOrigin({0.0, 0.0, distance});
   View view(camera, {});
   view.SetImage(cv::Mat(camera.height, camera.width, CV_8UC3, cv::Scalar(128, 128, 128)));
   return view;

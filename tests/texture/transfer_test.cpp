@@ -16,9 +16,12 @@
 #include "carousel/core/view.h"
 #include "carousel/texture/atlas.h"
 #include "carousel/texture/texture_map.h"
+#include "test_camera.h"
 
 namespace carousel::texture {
 namespace {
+
+using test_support::CameraLookingAtOrigin;
 
 const cv::Vec3b kSquareBgr(200, 120, 40), kOccluderBgr(30, 30, 220), kBackdropBgr(128, 128, 128);
 
@@ -29,24 +32,6 @@ void AddSquare(Mesh* mesh, double side, const Eigen::Vector3d& centre) {
   const auto c = mesh->add_vertex({x + h, y + h, z}), d = mesh->add_vertex({x - h, y + h, z});
   mesh->add_face(a, b, c);
   mesh->add_face(a, c, d);
-}
-
-// A 1600 x 1200 camera at `centre` looking at the origin, image rows going towards -Y.
-CameraModel CameraAt(const Eigen::Vector3d& centre) {
-  CameraModel camera;
-  camera.width = 1600;
-  camera.height = 1200;
-  camera.fx = camera.fy = 2000.0;
-  camera.cx = 799.5;
-  camera.cy = 599.5;
-  const Eigen::Vector3d forward = -centre.normalized();
-  const Eigen::Vector3d down(0.0, -1.0, 0.0);  // perpendicular to `forward` here
-  Eigen::Matrix3d rotation;
-  rotation.row(0) = down.cross(forward).transpose();
-  rotation.row(1) = down.transpose();
-  rotation.row(2) = forward.transpose();
-  camera.cam_from_world = Rigid3d(rotation, -(rotation * centre));
-  return camera;
 }
 
 // The photo of `mesh` through `camera`: faces 0 and 1 (the square) in kSquareBgr, the others
@@ -101,11 +86,11 @@ TEST(TransferTest, TexelsHiddenInTheFrontViewComeFromAViewThatSeesThem) {
   atlas.size.size = 1024;
   Progress progress;
   const AtlasResult built = BuildAtlas(&mesh, atlas, progress);
-  const CameraModel above = CameraAt({0.0, 0.0, 0.5});
+  const CameraModel above = CameraLookingAtOrigin({0.0, 0.0, 0.5});
   const std::vector<View> views = {
       Photograph(mesh, above),
-      Photograph(mesh, CameraAt({-0.5 * std::sin(std::numbers::pi / 6), 0.0,
-                                 0.5 * std::cos(std::numbers::pi / 6)}))};
+      Photograph(mesh, CameraLookingAtOrigin({-0.5 * std::sin(std::numbers::pi / 6), 0.0,
+                                              0.5 * std::cos(std::numbers::pi / 6)}))};
   const GroupingResult grouping = GroupFaces(mesh, views, {}, progress);
   ASSERT_EQ(grouping.front_view[0], 0);  // the part hidden is between its sample points
 
