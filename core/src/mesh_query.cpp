@@ -101,6 +101,8 @@ TriangleTree::TriangleTree(std::vector<Triangle> triangles) : triangles_(std::mo
                     "TriangleTree: too many triangles (" << triangles_.size() << ")");
   order_.resize(triangles_.size());
   std::iota(order_.begin(), order_.end(), 0U);
+  boxes_.reserve(triangles_.size());
+  for (const Triangle& t : triangles_) boxes_.push_back(BoxOf(t));
   if (!triangles_.empty()) {
     nodes_.reserve(2 * triangles_.size() / kLeafSize + 1);
     Build(0, static_cast<std::uint32_t>(triangles_.size()));
@@ -113,9 +115,9 @@ std::uint32_t TriangleTree::Build(std::uint32_t begin, std::uint32_t end) {
   Eigen::AlignedBox3d box;
   Eigen::AlignedBox3d centroids;
   for (std::uint32_t i = begin; i < end; ++i) {
-    const Triangle& t = triangles_[order_[i]];
-    box.extend(BoxOf(t));
-    centroids.extend(Eigen::Vector3d((t.a + t.b + t.c) / 3.0));
+    const Eigen::AlignedBox3d& b = boxes_[order_[i]];
+    box.extend(b);
+    centroids.extend(b.center());
   }
   nodes_[index].box = box;
   if (end - begin <= kLeafSize) {
@@ -184,18 +186,22 @@ void TriangleTree::Overlapping(const Eigen::AlignedBox3d& box,
                                std::vector<std::size_t>* out) const {
   out->clear();
   if (nodes_.empty()) return;
-  std::vector<std::uint32_t> stack{0};
-  while (!stack.empty()) {
-    const Node& node = nodes_[stack.back()];
-    stack.pop_back();
+  // A fixed stack (a median-split tree of < 2^32 triangles is at most 32 deep): this runs once
+  // per face in FindSelfIntersections, and an allocation per query cost more than the query.
+  std::array<std::uint32_t, 128> stack;
+  int top = 0;
+  stack[top++] = 0;
+  while (top > 0) {
+    const Node& node = nodes_[stack[--top]];
     if (!node.box.intersects(box)) continue;
     if (node.count > 0) {
       for (std::uint32_t i = node.first; i < node.first + node.count; ++i)
-        if (BoxOf(triangles_[order_[i]]).intersects(box)) out->push_back(order_[i]);
+        if (boxes_[order_[i]].intersects(box)) out->push_back(order_[i]);
       continue;
     }
-    stack.push_back(node.first);
-    stack.push_back(node.right);
+    if (top + 2 > static_cast<int>(stack.size())) continue;  // cannot happen, see above
+    stack[top++] = node.first;
+    stack[top++] = node.right;
   }
 }
 

@@ -50,6 +50,7 @@ class TriangleTree {
   std::uint32_t Build(std::uint32_t begin, std::uint32_t end);
 
   std::vector<Triangle> triangles_;
+  std::vector<Eigen::AlignedBox3d> boxes_;  // per triangle, in triangles_' order
   std::vector<std::uint32_t> order_;
   std::vector<Node> nodes_;
 };
