@@ -45,6 +45,10 @@ constexpr double kMaxRepairFraction = 0.25;
 constexpr double kMinKeptOfCandidates = 0.1;
 // The plate counts when this fraction of its inner edge is seen against the backdrop.
 constexpr double kMinVisiblePlateEdge = 0.1;
+// The views of a camera agree on the plate's colour (AgreedPlates) when it has at least this
+// many keyed views, and a colour is the plate's when at least this many views saw it.
+constexpr std::size_t kMinPlateAgreementViews = 3;
+constexpr int kMinPlateAgreement = 2;
 // A silhouette covers at least this fraction of the photo.
 constexpr double kMinObjectFraction = 1e-4;
 // 8-bit level from which a pixel counts as clipped white.
@@ -183,6 +187,27 @@ bool FitColourModel(const std::vector<Sample>& samples, const std::vector<bool>&
   std::size_t n = 0;
   for (const bool b : inlier) n += b ? 1 : 0;
   return n >= min_inliers;
+}
+
+// A plate colour model as PlateKeying keeps it, and back; the model's mean over `samples`.
+PlateKeying FittedPlate(const ColourModel& model, const std::vector<Sample>& samples) {
+  PlateKeying plate;
+  plate.state = PlateKeying::State::kFitted;
+  plate.terms = model.terms;
+  for (int k = 0; k < 6; ++k)
+    for (int ch = 0; ch < 3; ++ch) plate.coeff[3 * k + ch] = model.coeff(k, ch);
+  cv::Vec3d sum(0.0, 0.0, 0.0);
+  for (const Sample& sample : samples) sum += cv::Vec3d(model.At(sample.x, sample.y));
+  plate.mean_bgr = samples.empty() ? sum : sum / static_cast<double>(samples.size());
+  return plate;
+}
+
+ColourModel PlateModel(const PlateKeying& plate) {
+  ColourModel model;
+  model.terms = plate.terms;
+  for (int k = 0; k < 6; ++k)
+    for (int ch = 0; ch < 3; ++ch) model.coeff(k, ch) = plate.coeff[3 * k + ch];
+  return model;
 }
 
 // The turntable plate's outline in the image, filled (plate), and the rim band where plate and
@@ -1373,7 +1398,8 @@ cv::Mat AreaReduced(const cv::Mat& image, cv::Size size) {
 cv::Mat SegmentAtWorkingSize(const cv::Mat& image, const CameraModel& camera,
                              const SilhouetteOptions& options, double rim_px,
                              const cv::Mat& background, const std::string& name,
-                             SilhouetteStats* stats, const cv::Mat& prior, double* grid_step) {
+                             SilhouetteStats* stats, const cv::Mat& prior, double* grid_step,
+                             const PlateKeying* imposed) {
   const bool difference = options.method == SilhouetteMethod::kDifference;
   const int width = image.cols;
   const int height = image.rows;
@@ -1432,10 +1458,24 @@ cv::Mat SegmentAtWorkingSize(const cv::Mat& image, const CameraModel& camera,
                         "the object agree with a smooth backdrop colour (object filling "
                         "the frame, or a cluttered background; use the difference method)");
     }
-    if (!plate_samples.empty()) {
+    const auto min_plate = std::max<std::size_t>(10, plate_samples.size() / 5);
+    const PlateKeying::State told = imposed != nullptr ? imposed->state : PlateKeying::State::kNone;
+    if (plate_samples.empty()) {
+      // No plate in the frame.
+    } else if (told == PlateKeying::State::kFitted) {
+      // The colour the other views of this camera agree on seeds the fit; where too little of
+      // the plate shows to fit, it is keyed against that colour as it is.
+      const ColourModel agreed = PlateModel(*imposed);
+      for (std::size_t i = 0; i < plate_samples.size(); ++i)
+        plate_seed[i] = cv::norm(plate_samples[i].colour -
+                                 agreed.At(plate_samples[i].x, plate_samples[i].y)) <= 2.5 * floor;
+      have_plate = FitColourModel(plate_samples, plate_seed, 3, floor, min_plate, &plate_colour) ||
+                   FitColourModel(plate_samples, plate_seed, 1, floor, min_plate, &plate_colour);
+      if (!have_plate) plate_colour = agreed;
+      have_plate = true;
+    } else if (told != PlateKeying::State::kHidden) {
       // All plate pixels seed the fit, which starts from those near their median colour:
       // the object may cover part of the plate.
-      const auto min_plate = std::max<std::size_t>(10, plate_samples.size() / 5);
       have_plate = FitColourModel(plate_samples, plate_seed, 3, floor, min_plate, &plate_colour) ||
                    FitColourModel(plate_samples, plate_seed, 1, floor, min_plate, &plate_colour);
       // A product larger than the plate hides it, and the fit then found the product's own
@@ -1443,8 +1483,15 @@ cv::Mat SegmentAtWorkingSize(const cv::Mat& image, const CameraModel& camera,
       if (have_plate && VisiblePlateEdge(image, plate, rim, backdrop, plate_colour,
                                          Classifier(options)) < kMinVisiblePlateEdge)
         have_plate = false;
-      if (!have_plate)
-        CAROUSEL_LOG_WARN(name << ": the turntable plate is hidden; it is treated as backdrop");
+      if (!have_plate) CAROUSEL_LOG_DEBUG(name << ": the turntable plate looks hidden");
+    }
+    if (stats != nullptr && !plate_samples.empty()) {
+      if (have_plate) {
+        stats->plate = FittedPlate(plate_colour, plate_samples);
+      } else {
+        stats->plate = {};
+        stats->plate.state = PlateKeying::State::kHidden;
+      }
     }
   }
 
@@ -1802,7 +1849,7 @@ void CheckNotCutByThePlate(const std::vector<View>& views,
 cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
                           const SilhouetteOptions& options, const cv::Mat& background,
                           const std::string& name, SilhouetteStats* stats, const cv::Mat& prior,
-                          const cv::Mat& photo) {
+                          const cv::Mat& photo, const PlateKeying* plate) {
   options.Validate();
   CAROUSEL_THROW_IF(!prior.empty() && prior.type() != CV_8UC1, InvalidArgument,
                     name << ": the silhouette prior must be 8-bit");
@@ -1845,7 +1892,7 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
         backlit ? SegmentBacklitAtWorkingSize(work_image, options, name, stats, work_prior)
                 : SegmentAtWorkingSize(work_image, work_camera, options,
                                        options.plate_rim_px * work_scale, work_background, name,
-                                       stats, work_prior, &grid_step);
+                                       stats, work_prior, &grid_step, plate);
     fg = Upsampled(work_fg, image.size(), &box);
   } else {
     cv::Mat full_prior = prior;
@@ -1853,7 +1900,7 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
       cv::resize(prior, full_prior, image.size(), 0, 0, cv::INTER_NEAREST);
     fg = backlit ? SegmentBacklitAtWorkingSize(image, options, name, stats, full_prior)
                  : SegmentAtWorkingSize(image, camera, options, options.plate_rim_px, background,
-                                        name, stats, full_prior, &grid_step);
+                                        name, stats, full_prior, &grid_step, plate);
     box = cv::boundingRect(fg);
   }
   if (options.refine_boundary) {
@@ -1886,6 +1933,94 @@ cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
   }
   return fg;
 }
+
+namespace {
+
+// The views of one camera in one pass: the table turns about its axis, so the plate's centre
+// and a point above it project to the same pixels in each.
+std::vector<std::vector<std::size_t>> ViewsByCamera(const std::vector<View>& views,
+                                                    const std::vector<std::size_t>& indices) {
+  struct Group {
+    CameraModel camera;
+    Eigen::Vector2d centre, above;
+    std::vector<std::size_t> views;
+  };
+  std::vector<Group> groups;
+  for (const std::size_t i : indices) {
+    const CameraModel& camera = views[i].camera();
+    const auto centre = camera.Project(Eigen::Vector3d::Zero());
+    const auto above = camera.Project(Eigen::Vector3d(0.0, 0.0, 0.05));
+    if (!centre || !above) continue;
+    auto same = [&](const Group& g) {
+      return g.camera.width == camera.width && g.camera.height == camera.height &&
+             std::abs(g.camera.fx - camera.fx) < 1e-6 * camera.fx &&
+             (g.centre - *centre).norm() < 0.5 && (g.above - *above).norm() < 0.5;
+    };
+    auto it = std::find_if(groups.begin(), groups.end(), same);
+    if (it == groups.end()) it = groups.insert(groups.end(), {camera, *centre, *above, {}});
+    it->views.push_back(i);
+  }
+  std::vector<std::vector<std::size_t>> out;
+  for (Group& g : groups) out.push_back(std::move(g.views));
+  return out;
+}
+
+// The views of each camera agree on the plate (see PlateKeying): what each view should be
+// keyed against, where it differs from what the view found alone (state kNone: keep it).
+std::vector<PlateKeying> AgreedPlates(const std::vector<View>& views,
+                                      const SilhouetteOptions& options,
+                                      const std::vector<SilhouetteStats>& stats) {
+  std::vector<PlateKeying> told(views.size());
+  std::vector<std::size_t> keyed;
+  for (std::size_t i = 0; i < views.size(); ++i)
+    if (stats[i].plate.state != PlateKeying::State::kNone) keyed.push_back(i);
+  // Two fits of the same plate differ by noise and by the product's shadow on it.
+  const double tolerance = 1.5 * std::max(12.0, 2.0 * options.noise_threshold);
+  for (const std::vector<std::size_t>& camera : ViewsByCamera(views, keyed)) {
+    if (camera.size() < kMinPlateAgreementViews) continue;
+    std::vector<std::size_t> fitted;
+    for (const std::size_t i : camera)
+      if (stats[i].plate.state == PlateKeying::State::kFitted) fitted.push_back(i);
+    auto agree = [&](std::size_t a, std::size_t b) {
+      return cv::norm(stats[a].plate.mean_bgr - stats[b].plate.mean_bgr) <= tolerance;
+    };
+    // The fit most others confirm.
+    std::size_t best = 0;
+    int best_support = 0;
+    for (const std::size_t i : fitted) {
+      const auto support = std::count_if(fitted.begin(), fitted.end(),
+                                         [&](std::size_t j) { return j != i && agree(i, j); });
+      if (support > best_support) {
+        best = i;
+        best_support = static_cast<int>(support);
+      }
+    }
+    if (best_support + 1 >= kMinPlateAgreement) {
+      for (const std::size_t i : camera)
+        if (stats[i].plate.state != PlateKeying::State::kFitted || !agree(i, best))
+          told[i] = stats[best].plate;
+      continue;
+    }
+    // No colour seen twice: what was fitted is the product's own colour.
+    for (const std::size_t i : fitted) told[i].state = PlateKeying::State::kHidden;
+    if (fitted.empty()) {
+      CAROUSEL_LOG_WARN(views[camera.front()].name()
+                        << " and the other " << camera.size() - 1
+                        << " views of its camera: the turntable plate is hidden; it is keyed "
+                           "as backdrop");
+    } else {
+      CAROUSEL_LOG_WARN(views[camera.front()].name()
+                        << " and the other " << camera.size() - 1
+                        << " views of its camera: the turntable plate is hidden; the colour "
+                        << (fitted.size() == 1 ? "one view" : "some views")
+                        << " took for it agrees with no other view's, so it is the product's; "
+                           "the plate is keyed as backdrop");
+    }
+  }
+  return told;
+}
+
+}  // namespace
 
 SilhouettesResult ComputeSilhouettes(const std::vector<View>& views,
                                      const std::vector<cv::Mat>& backgrounds,
@@ -1927,6 +2062,26 @@ SilhouettesResult ComputeSilhouettes(const std::vector<View>& views,
       progress.Report(++done, views.size());
     }
   });
+  // The views of a camera agree on the plate: those that saw it otherwise are keyed again.
+  if (options.method == SilhouetteMethod::kKey) {
+    const std::vector<PlateKeying> told = AgreedPlates(views, options, result.stats);
+    std::vector<std::size_t> again;
+    for (std::size_t i = 0; i < views.size(); ++i)
+      if (told[i].state != PlateKeying::State::kNone) again.push_back(i);
+    ParallelFor(again.size(), 1, options.threads, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t k = begin; k < end; ++k) {
+        progress.CheckCancelled();
+        const View& view = views[again[k]];
+        SilhouetteStats stats;
+        result.masks[again[k]] = ComputeSilhouette(view.Image(), view.camera(), options, {},
+                                                   view.name(), &stats, {}, {}, &told[again[k]]);
+        result.stats[again[k]] = stats;
+        view.ReleasePixels();
+        CAROUSEL_LOG_DEBUG(view.name() << ": keyed again against the plate its camera's views "
+                                          "agree on");
+      }
+    });
+  }
   progress.EndStage();
   CheckNotCutByThePlate(views, result.stats);
   if (options.multi_view && views.size() >= kMinConsistencyViews)
@@ -1977,9 +2132,11 @@ void MakeConsistent(const std::vector<View>& views, const std::vector<cv::Mat>& 
         } else {
           const bool backlit = options.method == SilhouetteMethod::kBacklit;
           const View& source = backlit ? mask_shots[v] : view;
+          const PlateKeying plate = result->stats[v].plate;
           result->masks[v] =
               ComputeSilhouette(source.Image(), view.camera(), options, background, source.name(),
-                                &stats, priors[v], backlit ? view.Image() : cv::Mat());
+                                &stats, priors[v], backlit ? view.Image() : cv::Mat(),
+                                plate.state != PlateKeying::State::kNone ? &plate : nullptr);
           source.ReleasePixels();
           view.ReleasePixels();
         }

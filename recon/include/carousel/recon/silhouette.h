@@ -41,6 +41,7 @@
 // Masks are 8-bit alpha, 255 = object, >= 128 = object for the hull (DESIGN.md).
 #pragma once
 
+#include <array>
 #include <string>
 #include <vector>
 
@@ -105,6 +106,26 @@ struct SilhouetteOptions {
   void Validate() const;
 };
 
+// How colour keying treated the turntable plate in a view. The views of one camera see the
+// same plate under the same light, so ComputeSilhouettes makes them agree: a plate colour that
+// no other view of the camera confirms is the product's (a beak over the plate) and is not
+// keyed away; a view that found the plate hidden, or another colour, keys against the colour
+// the others agree on.
+struct PlateKeying {
+  enum class State {
+    kNone,    // no plate in the frame, or not keyed (the difference and backlit methods)
+    kFitted,  // keyed against `coeff`
+    kHidden,  // the plate is not seen: keyed as backdrop
+  };
+  State state = State::kNone;
+  // kFitted: the plate's 8-bit BGR colour as a quadratic over the image's coordinates
+  // normalised to [-1, 1] (basis 1, x, y, x^2, xy, y^2; `terms` of them used), row k of
+  // channel c at coeff[3 * k + c]; `mean_bgr`: its mean over the plate, what views compare.
+  int terms = 0;
+  std::array<double, 18> coeff{};
+  cv::Vec3d mean_bgr;
+};
+
 struct SilhouetteStats {
   double object_fraction = 0.0;    // mask area / image area
   double backdrop_residual = 0.0;  // RMS of the fitted backdrop model on its inliers, levels
@@ -123,6 +144,8 @@ struct SilhouetteStats {
   // step repairs it geometrically (holes well inside the others' hull filled, spills outside
   // it removed) instead of segmenting the photo again.
   bool given = false;
+  // Colour keying: the plate as this view was keyed against it (after the views agreed).
+  PlateKeying plate;
 };
 
 // One photo's silhouette. `background` is the background plate (kDifference; same size,
@@ -134,11 +157,16 @@ struct SilhouetteStats {
 // takes the larger coverage. \throw InvalidArgument
 // (image type, missing background, sizes), FormatError if the photo
 //        shows no backdrop to key against, no object, an object touching the frame's border
-//        (with check_border) or is over-exposed.
+//        (with check_border) or is over-exposed. `plate` (colour keying, optional): how to treat
+//        the
+// plate instead of judging it from this photo alone: kHidden keys it as backdrop, kFitted
+// seeds the plate's fit with what is near that colour (and keys against it when too little
+// of the plate shows to fit).
 cv::Mat ComputeSilhouette(const cv::Mat& image, const CameraModel& camera,
                           const SilhouetteOptions& options, const cv::Mat& background = {},
                           const std::string& name = "image", SilhouetteStats* stats = nullptr,
-                          const cv::Mat& prior = {}, const cv::Mat& photo = {});
+                          const cv::Mat& prior = {}, const cv::Mat& photo = {},
+                          const PlateKeying* plate = nullptr);
 
 struct SilhouettesResult {
   std::vector<cv::Mat> masks;  // per view, CV_8UC1
