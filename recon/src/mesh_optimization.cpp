@@ -339,6 +339,34 @@ void SmoothWithoutIntersections(Mesh* mesh, const MeshOptimizationOptions& optio
   CAROUSEL_LOG_WARN("mesh: smoothing undone: it made the surface intersect itself");
 }
 
+// Moves the vertices of intersecting faces, and `rings` of their neighbours, back to
+// `positions`, growing the neighbourhood each round until no faces intersect (or 8 rounds).
+// Returns the pairs still intersecting.
+std::vector<std::pair<int, int>> UndoAroundIntersections(Mesh* mesh,
+                                                         const std::vector<Mesh::Point>& positions,
+                                                         std::vector<std::pair<int, int>> pairs) {
+  constexpr int kRounds = 8;
+  for (int round = 0; round < kRounds && !pairs.empty(); ++round) {
+    std::vector<char> marked(mesh->n_vertices(), 0);
+    std::vector<Mesh::VertexHandle> undo;
+    auto mark = [&](Mesh::VertexHandle v) {
+      if (!marked[v.idx()]) undo.push_back(v);
+      marked[v.idx()] = 1;
+    };
+    for (const auto& [f, g] : pairs)
+      for (const int face : {f, g})
+        for (const auto v : mesh->fv_range(Mesh::FaceHandle(face))) mark(v);
+    for (int ring = 0; ring <= round; ++ring) {
+      const std::size_t n = undo.size();
+      for (std::size_t k = 0; k < n; ++k)
+        for (const auto w : mesh->vv_range(undo[k])) mark(w);
+    }
+    for (const auto v : undo) mesh->set_point(v, positions[v.idx()]);
+    pairs = FindSelfIntersections(*mesh, 1000);
+  }
+  return pairs;
+}
+
 }  // namespace
 
 void RemeshIsotropic(Mesh* mesh, double edge_length, int iterations) {
@@ -437,6 +465,9 @@ MeshOptimizationResult OptimizeMesh(const Mesh& hull, const MeshOptimizationOpti
     if (round > 0) mesh.release_vertex_status();
     // Smoothing and decimation shrink curved parts slightly: offset the surface along its
     // normals by the uniform distance that restores the target volume (dV = area * d).
+    std::vector<Mesh::Point> decimated(mesh.n_vertices());
+    for (const auto v : mesh.vertices()) decimated[v.idx()] = mesh.point(v);
+    const bool folded_before_offset = !FindSelfIntersections(mesh, 1).empty();
     for (int iteration = 0; iteration < 3; ++iteration) {
       mesh.RecomputeNormals();
       const double area = mesh.SurfaceArea();
@@ -445,7 +476,11 @@ MeshOptimizationResult OptimizeMesh(const Mesh& hull, const MeshOptimizationOpti
       for (const auto v : mesh.vertices())
         mesh.set_point(v, mesh.point(v) + offset * mesh.normal(v));
     }
-    const auto pairs = FindSelfIntersections(mesh, 1000);
+    auto pairs = FindSelfIntersections(mesh, 1000);
+    // In a crevice narrower than twice the offset (a beak's parted lips) the offset carries
+    // either side through the other: undo it there, a ring wider each round.
+    if (!folded_before_offset && !pairs.empty())
+      pairs = UndoAroundIntersections(&mesh, decimated, pairs);
     result.self_intersections = pairs.size();
     result.repair_rounds = round;
     if (pairs.empty()) break;
