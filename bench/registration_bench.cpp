@@ -242,6 +242,12 @@ int main(int argc, char** argv) {
         found.residual_px, 1e3 * found.residual_m, 100.0 * found.inconsistent_fraction,
         found.runner_up_ratio, found.runner_up_deg, seconds, found.seconds_hulls,
         found.seconds_search, found.seconds_refine);
+    if (found.colour_points > 0)
+      std::printf(
+          "  colour: %s, correlation %.2f at the pose against %.2f at the other tied "
+          "one, %d points; %.2f s\n",
+          found.colour_decided ? "decided the pose" : "undecided", found.colour_correlation,
+          found.runner_up_colour_correlation, found.colour_points, found.seconds_colour);
     std::fflush(stdout);
     if (model && status == "registered") {
       const double truth_volume = SignedVolume(truth);

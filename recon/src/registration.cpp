@@ -18,6 +18,22 @@
 namespace carousel::recon {
 namespace {
 
+// Colour consistency (a tie between poses): photos reduced to this longest side, pixels; a
+// view sees a point when it is at least this frontal; at least this many points seen by both
+// passes; a pose wins when its correlation reaches kColourMinWin and beats every other tied
+// pose's (kColourDistinctDeg away) by kColourMinMargin.
+constexpr int kColourSide = 480;
+constexpr double kColourMinCosine = 0.5;
+constexpr int kColourMinPoints = 100;
+constexpr double kColourMinWin = 0.5;
+constexpr double kColourMinMargin = 0.1;
+// Tied poses are tried turned about the vertical axis in steps of this many degrees, and the
+// runner-up in colour is the best at least kColourDistinctDeg from the winner.
+constexpr int kColourStepDeg = 5;
+// Colours are compared less their mean over the points at the same height, in this many bands.
+constexpr int kColourBins = 24;
+constexpr double kColourDistinctDeg = 30.0;
+
 // One view at one level: its camera scaled to the level's mask, and per pixel the distance to
 // the nearest object pixel (0 on the object).
 struct LevelView {
@@ -297,7 +313,8 @@ std::vector<Eigen::Matrix3d> SampleRotations(int count) {
 // Surface points of the pass's own visual hull (its own table frame), on a coarse grid, from
 // the masks scaled to at most `max_side` pixels (a grid of 96 cells needs no more).
 std::vector<Eigen::Vector3d> HullPoints(const std::vector<View>& full_size, int max_side,
-                                        int threads, Progress& progress, Eigen::AlignedBox3d* box) {
+                                        int threads, Progress& progress, Eigen::AlignedBox3d* box,
+                                        std::vector<Eigen::Vector3d>* normals = nullptr) {
   std::vector<View> views(full_size.size());
   ParallelFor(views.size(), 1, threads, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
@@ -321,12 +338,20 @@ std::vector<Eigen::Vector3d> HullPoints(const std::vector<View>& full_size, int 
   options.proxy_max_faces = 0;
   options.min_view_consistency = 0.0;
   options.threads = threads;
-  const VisualHullResult hull = ComputeVisualHull(views, options, progress);
+  VisualHullResult hull = ComputeVisualHull(views, options, progress);
   std::vector<Eigen::Vector3d> points;
   points.reserve(hull.mesh.n_vertices());
   for (const auto vertex : hull.mesh.vertices()) {
     const auto& p = hull.mesh.point(vertex);
     points.emplace_back(p[0], p[1], p[2]);
+  }
+  if (normals != nullptr) {
+    hull.mesh.RecomputeNormals();
+    normals->clear();
+    for (const auto vertex : hull.mesh.vertices()) {
+      const auto& n = hull.mesh.normal(vertex);
+      normals->emplace_back(n[0], n[1], n[2]);
+    }
   }
   *box = Eigen::AlignedBox3d();
   for (const Eigen::Vector3d& p : points) box->extend(p);
@@ -394,6 +419,125 @@ std::vector<Pose> Distinct(std::vector<Pose> poses, double min_deg, std::size_t 
   return kept;
 }
 
+// ---- colour consistency: what breaks a tie between poses the silhouettes fit alike ----------
+
+// A pass's photos, reduced, with their cameras and masks shrunk to where colours are the
+// object's own.
+struct ColourView {
+  CameraModel camera;
+  cv::Mat image;  // CV_8UC3
+  cv::Mat inner;  // CV_8UC1, the mask eroded
+};
+
+std::vector<ColourView> ColourViews(const std::vector<View>& views, int threads) {
+  std::vector<ColourView> out(views.size());
+  ParallelFor(views.size(), 1, threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      const cv::Mat& image = views[i].Image();
+      const double factor =
+          std::min(1.0, static_cast<double>(kColourSide) / std::max(image.cols, image.rows));
+      ColourView& view = out[i];
+      view.camera = views[i].camera().Scaled(factor);
+      const cv::Size size(view.camera.width, view.camera.height);
+      cv::resize(image, view.image, size, 0, 0, cv::INTER_AREA);
+      cv::Mat mask;
+      cv::resize(views[i].Mask(), mask, size, 0, 0, cv::INTER_AREA);
+      cv::erode(mask >= 128, view.inner, cv::Mat(), cv::Point(-1, -1), 2);
+      views[i].ReleasePixels();
+    }
+  });
+  return out;
+}
+
+// The colour a pass's most frontal view shows at `point` (normal `normal`, both in the pass's
+// frame), if some view sees it within kColourMinCosine of frontal and inside its mask.
+std::optional<cv::Vec3f> ColourAt(const std::vector<ColourView>& views,
+                                  const Eigen::Vector3d& point, const Eigen::Vector3d& normal) {
+  double best = kColourMinCosine;
+  std::optional<cv::Vec3f> colour;
+  for (const ColourView& view : views) {
+    const Eigen::Vector3d towards = (view.camera.Centre() - point).normalized();
+    const double cosine = towards.dot(normal);
+    if (cosine < best) continue;
+    const auto pixel = view.camera.Project(point);
+    if (!pixel) continue;
+    const int x = static_cast<int>(std::lround(pixel->x()));
+    const int y = static_cast<int>(std::lround(pixel->y()));
+    if (x < 0 || y < 0 || x >= view.inner.cols || y >= view.inner.rows ||
+        !view.inner.at<std::uint8_t>(y, x))
+      continue;
+    best = cosine;
+    const cv::Vec3b& c = view.image.at<cv::Vec3b>(y, x);
+    colour = cv::Vec3f(c[0], c[1], c[2]);
+  }
+  return colour;
+}
+
+// How well the passes' photos agree in colour at the reference hull's points with the pass
+// laid as `table_from_object` says: the Pearson correlation per channel over the points both
+// passes see frontally, averaged over the channels (a gain and an offset per pass, the light
+// changed with the pose, do not count), and the points it took. -1 when fewer than
+// kColourMinPoints.
+std::pair<double, int> ColourCorrelation(const std::vector<ColourView>& reference,
+                                         const std::vector<ColourView>& pass,
+                                         const std::vector<Eigen::Vector3d>& points,
+                                         const std::vector<Eigen::Vector3d>& normals,
+                                         const Rigid3d& table_from_object) {
+  std::vector<cv::Vec3f> a, b;
+  std::vector<double> height;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const auto first = ColourAt(reference, points[i], normals[i]);
+    if (!first) continue;
+    const auto second =
+        ColourAt(pass, table_from_object * points[i], table_from_object.rotation * normals[i]);
+    if (!second) continue;
+    // Chromaticity: the light's direction scales a point's channels alike.
+    auto chroma = [](const cv::Vec3f& c) { return c / (c[0] + c[1] + c[2] + 30.0f); };
+    a.push_back(chroma(*first));
+    b.push_back(chroma(*second));
+    height.push_back(points[i].z());
+  }
+  const int n = static_cast<int>(a.size());
+  if (n < kColourMinPoints) return {-1.0, n};
+  // What changes with the height alone (a cap, a band) is the same at every turn about the
+  // upright axis: only what is left of each pass's colours at its height is compared.
+  const auto [low, high] = std::minmax_element(height.begin(), height.end());
+  const double span = std::max(1e-9, *high - *low);
+  std::vector<int> bin(n);
+  std::vector<cv::Vec3d> mean_a(kColourBins, cv::Vec3d(0, 0, 0)), mean_b = mean_a;
+  std::vector<int> count(kColourBins, 0);
+  for (int i = 0; i < n; ++i) {
+    bin[i] = std::min(kColourBins - 1, static_cast<int>((height[i] - *low) / span * kColourBins));
+    mean_a[bin[i]] += cv::Vec3d(a[i]);
+    mean_b[bin[i]] += cv::Vec3d(b[i]);
+    ++count[bin[i]];
+  }
+  for (int i = 0; i < n; ++i) {
+    a[i] -= cv::Vec3f(mean_a[bin[i]] / count[bin[i]]);
+    b[i] -= cv::Vec3f(mean_b[bin[i]] / count[bin[i]]);
+  }
+  double sum = 0.0;
+  for (int ch = 0; ch < 3; ++ch) {
+    double ma = 0.0, mb = 0.0;
+    for (int i = 0; i < n; ++i) {
+      ma += a[i][ch];
+      mb += b[i][ch];
+    }
+    ma /= n;
+    mb /= n;
+    double sab = 0.0, saa = 0.0, sbb = 0.0;
+    for (int i = 0; i < n; ++i) {
+      const double da = a[i][ch] - ma, db = b[i][ch] - mb;
+      sab += da * db;
+      saa += da * da;
+      sbb += db * db;
+    }
+    // A channel without contrast in either pass says nothing.
+    sum += saa > 1e-9 && sbb > 1e-9 ? sab / std::sqrt(saa * sbb) : 0.0;
+  }
+  return {sum / 3.0, n};
+}
+
 }  // namespace
 
 double RotationDistanceDeg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
@@ -428,6 +572,11 @@ const OptionTable<RegistrationOptions>& RegistrationOptions::Fields() {
                    "pass's pose ambiguous",
            .min = 1,
            .min_exclusive = true,
+           .advanced = true});
+    t.Add(&O::colour,
+          {.name = "pose-by-colour",
+           .help = "poses a symmetric product's silhouettes fit alike are told apart by where "
+                   "the two passes' photos agree in colour",
            .advanced = true});
     t.Add(&O::max_inconsistent,
           {.name = "max-inconsistent",
@@ -466,8 +615,9 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
 
   Stopwatch watch;
   Eigen::AlignedBox3d reference_box, pass_box;
-  const std::vector<Eigen::Vector3d> reference_points =
-      HullPoints(reference, options.max_side_px, threads, progress, &reference_box);
+  std::vector<Eigen::Vector3d> reference_normals;
+  const std::vector<Eigen::Vector3d> reference_points = HullPoints(
+      reference, options.max_side_px, threads, progress, &reference_box, &reference_normals);
   const std::vector<Eigen::Vector3d> pass_points =
       HullPoints(pass, options.max_side_px, threads, progress, &pass_box);
   result.size_m = reference_box.sizes().norm();
@@ -523,7 +673,98 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
   std::sort(candidates.begin(), candidates.end(),
             [](const Pose& a, const Pose& b) { return a.cost < b.cost; });
   // The runner-up is judged against the best as both were refined alike.
-  const double best_refined_rms = candidates.front().rms;
+  double best_refined_rms = candidates.front().rms;
+  // Poses the silhouettes fit alike (a symmetric product): the photos' colours decide, when
+  // they agree at one pose clearly better than at every other. A product symmetric about its
+  // upright axis (a bottle) fits alike turned about it, so each tied pose is tried turned about
+  // the first pass's vertical axis too, wherever the silhouettes still fit.
+  {
+    std::vector<std::size_t> tied = {0};
+    for (std::size_t k = 1; k < candidates.size(); ++k)
+      if (candidates[k].rms < options.ambiguity_ratio * best_refined_rms &&
+          RotationDistanceDeg(candidates.front().table_from_object.rotation,
+                              candidates[k].table_from_object.rotation) >= options.distinct_deg)
+        tied.push_back(k);
+    if (tied.size() > 1 && options.colour) {
+      Stopwatch colour_watch;
+      const std::vector<ColourView> reference_colours = ColourViews(reference, threads);
+      const std::vector<ColourView> pass_colours = ColourViews(pass, threads);
+      const std::vector<std::size_t> spread = Spread(reference_points.size(), 3000);
+      std::vector<Eigen::Vector3d> points, normals;
+      for (const std::size_t i : spread) {
+        points.push_back(reference_points[i]);
+        normals.push_back(reference_normals[i]);
+      }
+      auto turned = [&](const Rigid3d& pose, double deg) {
+        const Eigen::Matrix3d r =
+            Eigen::AngleAxisd(deg * std::numbers::pi / 180.0, Eigen::Vector3d::UnitZ())
+                .toRotationMatrix();
+        return pose * Rigid3d(r, c1 - r * c1);
+      };
+      struct Tried {
+        Rigid3d pose;
+        double correlation = -1.0;
+      };
+      std::vector<Tried> tried;
+      for (const std::size_t k : tied) {
+        for (int step = 0; step < 360 / kColourStepDeg; ++step) {
+          const Rigid3d pose = turned(candidates[k].table_from_object, step * kColourStepDeg);
+          if (step > 0 &&
+              Evaluate(fine, pose, threads).rms >= options.ambiguity_ratio * best_refined_rms)
+            continue;
+          const auto [r, n] =
+              ColourCorrelation(reference_colours, pass_colours, points, normals, pose);
+          result.colour_points = std::max(result.colour_points, n);
+          tried.push_back({pose, r});
+        }
+      }
+      std::size_t win = 0;
+      for (std::size_t t = 1; t < tried.size(); ++t)
+        if (tried[t].correlation > tried[win].correlation) win = t;
+      double second = -1.0;
+      for (const Tried& t : tried)
+        if (RotationDistanceDeg(t.pose.rotation, tried[win].pose.rotation) >= kColourDistinctDeg)
+          second = std::max(second, t.correlation);
+      // Within a step of the winner: by the degree, then the peak of a parabola through the
+      // best degree and its neighbours.
+      std::vector<double> by_degree(2 * kColourStepDeg + 1);
+      for (int deg = -kColourStepDeg; deg <= kColourStepDeg; ++deg)
+        by_degree[deg + kColourStepDeg] =
+            deg == 0 ? tried[win].correlation
+                     : ColourCorrelation(reference_colours, pass_colours, points, normals,
+                                         turned(tried[win].pose, deg))
+                           .first;
+      const auto peak = static_cast<int>(
+          std::max_element(by_degree.begin() + 1, by_degree.end() - 1) - by_degree.begin());
+      const double left = by_degree[peak - 1], centre = by_degree[peak],
+                   right = by_degree[peak + 1];
+      const double curvature = left - 2.0 * centre + right;
+      const double offset =
+          curvature < 0.0 ? std::clamp(0.5 * (left - right) / curvature, -0.5, 0.5) : 0.0;
+      Tried chosen;
+      chosen.pose = turned(tried[win].pose, peak - kColourStepDeg + offset);
+      chosen.correlation =
+          ColourCorrelation(reference_colours, pass_colours, points, normals, chosen.pose).first;
+      result.colour_correlation = chosen.correlation;
+      result.runner_up_colour_correlation = second;
+      result.colour_decided =
+          chosen.correlation >= kColourMinWin && chosen.correlation - second >= kColourMinMargin;
+      if (result.colour_decided) {
+        // Refined by the silhouettes from there (the symmetry leaves the turn to the colours),
+        // ahead of the poses it was chosen over.
+        Pose pose = Evaluate(fine, chosen.pose, threads);
+        for (const double pixels : {3.0, 1.5}) {
+          const Level narrowed = Narrowed(fine, pixels);
+          pose = Refine(narrowed, Evaluate(narrowed, pose.table_from_object, threads), c1, 12,
+                        threads, progress);
+        }
+        pose = Evaluate(fine, pose.table_from_object, threads);
+        candidates.insert(candidates.begin(), pose);
+        best_refined_rms = pose.rms;
+      }
+      result.seconds_colour = colour_watch.ElapsedSeconds();
+    }
+  }
   // The best: on to the bottom of its flat valley by compass search.
   {
     const Level narrowed = Narrowed(fine, 1.5);
@@ -555,7 +796,7 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
     result.runner_up = candidates[k].table_from_object;
     result.runner_up_deg = deg;
     result.runner_up_ratio = candidates[k].rms / std::max(1e-12, best_refined_rms);
-    result.ambiguous = result.runner_up_ratio < options.ambiguity_ratio;
+    result.ambiguous = result.runner_up_ratio < options.ambiguity_ratio && !result.colour_decided;
     break;
   }
   result.seconds_total = total.ElapsedSeconds();

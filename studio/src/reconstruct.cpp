@@ -293,6 +293,15 @@ std::vector<PassOutcome> RegisterPasses(const Session& session_in, Session& sess
           note << ", the next pose " << std::setprecision(1) << found.runner_up_deg
                << " deg away fits " << std::setprecision(2) << found.runner_up_ratio
                << " times worse";
+        if (found.colour_decided)
+          note << "; the silhouettes fit such poses alike, and the photos' colours chose this "
+                  "one (they agree with a correlation of "
+               << std::setprecision(2) << found.colour_correlation << " there, at most "
+               << found.runner_up_colour_correlation << " at the others)";
+        else if (found.colour_points > 0)
+          note << "; nor do the photos' colours tell the poses apart (correlation "
+               << std::setprecision(2) << found.colour_correlation << " against "
+               << found.runner_up_colour_correlation << ")";
         if (!found.matches) {
           outcome.status = "failed";
           outcome.note = note.str() +

@@ -17,7 +17,9 @@
 // at the coarse and a middle level, the best three distinct at the finest (masks of up to
 // `max_side_px`). A runner-up pose at least `distinct_deg` away whose residual is within
 // `ambiguity_ratio` of the best makes the registration ambiguous (a nearly symmetric product):
-// it is reported, never silently accepted.
+// it is reported, never silently accepted, unless the photos' colours tell the poses apart
+// (a symmetric bottle's label): the pose where the two passes' photos agree clearly better
+// in colour at the first pass's hull points is taken, and the result says so.
 // Units: metres; frames as View cameras say (reference: the object frame, pass: its table's).
 #pragma once
 
@@ -50,6 +52,10 @@ struct RegistrationOptions {
   int points = 4000;
   // The finest level's masks: longest side at most this, pixels, 256..20000.
   int max_side_px = 1600;
+  // Poses the silhouettes fit alike are told apart by the photos' colours (a symmetric
+  // product with a label): the pose where both passes' photos show the same colours at the
+  // same surface points, when it agrees clearly better than the others.
+  bool colour = true;
   // Worker threads; 0 = one per hardware thread.
   int threads = 0;
   static const OptionTable<RegistrationOptions>& Fields();
@@ -74,9 +80,17 @@ struct RegistrationResult {
   double runner_up_ratio = 0.0;  // the runner-up's residual / the best's (0: none)
   double runner_up_deg = 0.0;    // its rotation's distance from the best's
   std::optional<Rigid3d> runner_up;
+  // Poses the silhouettes fit alike, told apart by colour (options.colour): the correlation
+  // of the passes' colours at the chosen pose and at the best other tied pose (-1: too few
+  // points seen by both passes), the points compared, and whether colour decided the pose.
+  bool colour_decided = false;
+  double colour_correlation = 0.0;
+  double runner_up_colour_correlation = 0.0;
+  int colour_points = 0;
   int rotations_scored = 0;
   int points_reference = 0, points_pass = 0;
-  double seconds_hulls = 0.0, seconds_search = 0.0, seconds_refine = 0.0, seconds_total = 0.0;
+  double seconds_hulls = 0.0, seconds_search = 0.0, seconds_refine = 0.0, seconds_colour = 0.0,
+         seconds_total = 0.0;
 };
 
 // \pre every view has a mask (View::Mask()); at least 2 views in each pass.
