@@ -8,10 +8,12 @@
 #include <random>
 
 #include <Eigen/Cholesky>
+#include <Eigen/Geometry>
 #include <opencv2/imgproc.hpp>
 
 #include "carousel/core/error.h"
 #include "carousel/core/parallel.h"
+#include "carousel/core/raster.h"
 #include "carousel/core/timer.h"
 #include "carousel/recon/visual_hull.h"
 
@@ -33,6 +35,11 @@ constexpr int kColourStepDeg = 5;
 // Colours are compared less their mean over the points at the same height, in this many bands.
 constexpr int kColourBins = 24;
 constexpr double kColourDistinctDeg = 30.0;
+// From the operator's pose the colours try the turns within this many degrees of it (the
+// alternatives offered are kColourDistinctDeg apart, so one lies this close to the truth).
+constexpr int kColourStartDeg = 30;
+// An ambiguous result lists at most this many poses for the operator.
+constexpr int kMaxAlternatives = 12;
 
 // One view at one level: its camera scaled to the level's mask, and per pixel the distance to
 // the nearest object pixel (0 on the object).
@@ -310,11 +317,9 @@ std::vector<Eigen::Matrix3d> SampleRotations(int count) {
   return rotations;
 }
 
-// Surface points of the pass's own visual hull (its own table frame), on a coarse grid, from
-// the masks scaled to at most `max_side` pixels (a grid of 96 cells needs no more).
-std::vector<Eigen::Vector3d> HullPoints(const std::vector<View>& full_size, int max_side,
-                                        int threads, Progress& progress, Eigen::AlignedBox3d* box,
-                                        std::vector<Eigen::Vector3d>* normals = nullptr) {
+// The pass's own visual hull (its own table frame), on a coarse grid, from the masks scaled to
+// at most `max_side` pixels (a grid of 96 cells needs no more).
+Mesh PassHull(const std::vector<View>& full_size, int max_side, int threads, Progress& progress) {
   std::vector<View> views(full_size.size());
   ParallelFor(views.size(), 1, threads, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
@@ -338,18 +343,25 @@ std::vector<Eigen::Vector3d> HullPoints(const std::vector<View>& full_size, int 
   options.proxy_max_faces = 0;
   options.min_view_consistency = 0.0;
   options.threads = threads;
-  VisualHullResult hull = ComputeVisualHull(views, options, progress);
+  return ComputeVisualHull(views, options, progress).mesh;
+}
+
+// Surface points of the pass's own visual hull (PassHull), with their normals on request.
+std::vector<Eigen::Vector3d> HullPoints(const std::vector<View>& full_size, int max_side,
+                                        int threads, Progress& progress, Eigen::AlignedBox3d* box,
+                                        std::vector<Eigen::Vector3d>* normals = nullptr) {
+  Mesh mesh = PassHull(full_size, max_side, threads, progress);
   std::vector<Eigen::Vector3d> points;
-  points.reserve(hull.mesh.n_vertices());
-  for (const auto vertex : hull.mesh.vertices()) {
-    const auto& p = hull.mesh.point(vertex);
+  points.reserve(mesh.n_vertices());
+  for (const auto vertex : mesh.vertices()) {
+    const auto& p = mesh.point(vertex);
     points.emplace_back(p[0], p[1], p[2]);
   }
   if (normals != nullptr) {
-    hull.mesh.RecomputeNormals();
+    mesh.RecomputeNormals();
     normals->clear();
-    for (const auto vertex : hull.mesh.vertices()) {
-      const auto& n = hull.mesh.normal(vertex);
+    for (const auto vertex : mesh.vertices()) {
+      const auto& n = mesh.normal(vertex);
       normals->emplace_back(n[0], n[1], n[2]);
     }
   }
@@ -403,6 +415,18 @@ Eigen::Vector3d Centroid(const std::vector<Eigen::Vector3d>& points) {
   return sum / std::max<std::size_t>(1, points.size());
 }
 
+// `pose` turned about the object's upright axis through `centre` (object frame) so that its
+// turn about that axis is `reference`'s, the rest of it (a tilt) kept: a swing-twist split of
+// the rotation between them.
+Rigid3d WithTurnOf(const Rigid3d& pose, const Rigid3d& reference, const Eigen::Vector3d& centre) {
+  const Eigen::Quaterniond between(Eigen::Matrix3d(reference.rotation.transpose() * pose.rotation));
+  Eigen::Quaterniond twist(between.w(), 0.0, 0.0, between.z());
+  if (twist.norm() < 1e-12) return pose;
+  twist.normalize();
+  const Eigen::Matrix3d undo = twist.conjugate().toRotationMatrix();
+  return pose * Rigid3d(undo, centre - undo * centre);
+}
+
 // The poses, best first, keeping only those at least `min_deg` from every better one.
 std::vector<Pose> Distinct(std::vector<Pose> poses, double min_deg, std::size_t count) {
   std::sort(poses.begin(), poses.end(),
@@ -429,13 +453,14 @@ struct ColourView {
   cv::Mat inner;  // CV_8UC1, the mask eroded
 };
 
-std::vector<ColourView> ColourViews(const std::vector<View>& views, int threads) {
+std::vector<ColourView> ColourViews(const std::vector<View>& views, int threads,
+                                    int side = kColourSide) {
   std::vector<ColourView> out(views.size());
   ParallelFor(views.size(), 1, threads, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
       const cv::Mat& image = views[i].Image();
       const double factor =
-          std::min(1.0, static_cast<double>(kColourSide) / std::max(image.cols, image.rows));
+          std::min(1.0, static_cast<double>(side) / std::max(image.cols, image.rows));
       ColourView& view = out[i];
       view.camera = views[i].camera().Scaled(factor);
       const cv::Size size(view.camera.width, view.camera.height);
@@ -604,13 +629,15 @@ const OptionTable<RegistrationOptions>& RegistrationOptions::Fields() {
 void RegistrationOptions::Validate() const { Fields().Check(*this); }
 
 RegistrationResult RegisterPass(const std::vector<View>& reference, const std::vector<View>& pass,
-                                const RegistrationOptions& options, Progress& progress) {
+                                const RegistrationOptions& options, Progress& progress,
+                                const std::optional<Rigid3d>& start) {
   options.Validate();
   CAROUSEL_THROW_IF(reference.size() < 2 || pass.size() < 2, InvalidArgument,
                     "registration needs at least 2 views in each pass, got "
                         << reference.size() << " and " << pass.size());
   Stopwatch total;
   RegistrationResult result;
+  result.started = start.has_value();
   const int threads = options.threads;
 
   Stopwatch watch;
@@ -627,22 +654,27 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
   const double size = result.size_m;
   const Eigen::Vector3d c1 = Centroid(reference_points), c2 = Centroid(pass_points);
 
-  // Coarse: every sampled rotation, with the centroids laid on each other.
+  // Coarse: every sampled rotation, with the centroids laid on each other (or the operator's
+  // pose alone).
   watch.Restart();
   const Level coarse = MakeLevel(reference, pass, reference_points, pass_points, 8, 192, 300,
                                  0.08 * size, size, threads);
-  const std::vector<Eigen::Matrix3d> rotations = SampleRotations(options.rotations);
-  std::vector<Pose> scored(rotations.size());
-  ParallelFor(rotations.size(), 16, threads, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) {
-      progress.CheckCancelled();
-      const Rigid3d pose(rotations[i], c2 - rotations[i] * c1);
-      scored[i] = Evaluate(coarse, pose, 1);
-    }
-  });
-  result.rotations_scored = static_cast<int>(rotations.size());
-  std::vector<Pose> candidates =
-      Distinct(scored, 20.0, static_cast<std::size_t>(options.candidates));
+  std::vector<Pose> candidates;
+  if (start) {
+    candidates.push_back(Evaluate(coarse, *start, threads));
+  } else {
+    const std::vector<Eigen::Matrix3d> rotations = SampleRotations(options.rotations);
+    std::vector<Pose> scored(rotations.size());
+    ParallelFor(rotations.size(), 16, threads, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t i = begin; i < end; ++i) {
+        progress.CheckCancelled();
+        const Rigid3d pose(rotations[i], c2 - rotations[i] * c1);
+        scored[i] = Evaluate(coarse, pose, 1);
+      }
+    });
+    result.rotations_scored = static_cast<int>(rotations.size());
+    candidates = Distinct(scored, 20.0, static_cast<std::size_t>(options.candidates));
+  }
   result.seconds_search = watch.ElapsedSeconds();
 
   // Refinement: every candidate at the coarse and the middle level, the best three distinct
@@ -677,90 +709,108 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
   // Poses the silhouettes fit alike (a symmetric product): the photos' colours decide, when
   // they agree at one pose clearly better than at every other. A product symmetric about its
   // upright axis (a bottle) fits alike turned about it, so each tied pose is tried turned about
-  // the first pass's vertical axis too, wherever the silhouettes still fit.
+  // the first pass's vertical axis too, wherever the silhouettes still fit. From the
+  // operator's pose, only the turns within kColourStartDeg of it are tried.
+  struct Tried {
+    Rigid3d pose;
+    double rms = 0.0;
+    double correlation = -1.0;
+  };
+  std::vector<Tried> tried;
+  std::optional<Rigid3d> turn_set;  // a pose whose turn about the upright axis the colours set
   {
     std::vector<std::size_t> tied = {0};
-    for (std::size_t k = 1; k < candidates.size(); ++k)
+    for (std::size_t k = 1; k < candidates.size() && !start; ++k)
       if (candidates[k].rms < options.ambiguity_ratio * best_refined_rms &&
           RotationDistanceDeg(candidates.front().table_from_object.rotation,
                               candidates[k].table_from_object.rotation) >= options.distinct_deg)
         tied.push_back(k);
-    if (tied.size() > 1 && options.colour) {
+    if (tied.size() > 1 || (start && options.colour)) {
       Stopwatch colour_watch;
-      const std::vector<ColourView> reference_colours = ColourViews(reference, threads);
-      const std::vector<ColourView> pass_colours = ColourViews(pass, threads);
-      const std::vector<std::size_t> spread = Spread(reference_points.size(), 3000);
+      std::vector<ColourView> reference_colours, pass_colours;
       std::vector<Eigen::Vector3d> points, normals;
-      for (const std::size_t i : spread) {
-        points.push_back(reference_points[i]);
-        normals.push_back(reference_normals[i]);
+      if (options.colour) {
+        reference_colours = ColourViews(reference, threads);
+        pass_colours = ColourViews(pass, threads);
+        for (const std::size_t i : Spread(reference_points.size(), 3000)) {
+          points.push_back(reference_points[i]);
+          normals.push_back(reference_normals[i]);
+        }
       }
+      auto correlation = [&](const Rigid3d& pose) {
+        if (!options.colour) return std::pair<double, int>(-1.0, 0);
+        const auto found =
+            ColourCorrelation(reference_colours, pass_colours, points, normals, pose);
+        result.colour_points = std::max(result.colour_points, found.second);
+        return found;
+      };
       auto turned = [&](const Rigid3d& pose, double deg) {
         const Eigen::Matrix3d r =
             Eigen::AngleAxisd(deg * std::numbers::pi / 180.0, Eigen::Vector3d::UnitZ())
                 .toRotationMatrix();
         return pose * Rigid3d(r, c1 - r * c1);
       };
-      struct Tried {
-        Rigid3d pose;
-        double correlation = -1.0;
-      };
-      std::vector<Tried> tried;
+      const int first_step = start ? -kColourStartDeg / kColourStepDeg : 0;
+      const int last_step = start ? kColourStartDeg / kColourStepDeg : 360 / kColourStepDeg - 1;
       for (const std::size_t k : tied) {
-        for (int step = 0; step < 360 / kColourStepDeg; ++step) {
+        for (int step = first_step; step <= last_step; ++step) {
           const Rigid3d pose = turned(candidates[k].table_from_object, step * kColourStepDeg);
-          if (step > 0 &&
-              Evaluate(fine, pose, threads).rms >= options.ambiguity_ratio * best_refined_rms)
-            continue;
-          const auto [r, n] =
-              ColourCorrelation(reference_colours, pass_colours, points, normals, pose);
-          result.colour_points = std::max(result.colour_points, n);
-          tried.push_back({pose, r});
+          const double rms = step == 0 ? candidates[k].rms : Evaluate(fine, pose, threads).rms;
+          if (rms >= options.ambiguity_ratio * best_refined_rms) continue;
+          tried.push_back({pose, rms, correlation(pose).first});
         }
       }
-      std::size_t win = 0;
-      for (std::size_t t = 1; t < tried.size(); ++t)
-        if (tried[t].correlation > tried[win].correlation) win = t;
-      double second = -1.0;
-      for (const Tried& t : tried)
-        if (RotationDistanceDeg(t.pose.rotation, tried[win].pose.rotation) >= kColourDistinctDeg)
-          second = std::max(second, t.correlation);
-      // Within a step of the winner: by the degree, then the peak of a parabola through the
-      // best degree and its neighbours.
-      std::vector<double> by_degree(2 * kColourStepDeg + 1);
-      for (int deg = -kColourStepDeg; deg <= kColourStepDeg; ++deg)
-        by_degree[deg + kColourStepDeg] =
-            deg == 0 ? tried[win].correlation
-                     : ColourCorrelation(reference_colours, pass_colours, points, normals,
-                                         turned(tried[win].pose, deg))
-                           .first;
-      const auto peak = static_cast<int>(
-          std::max_element(by_degree.begin() + 1, by_degree.end() - 1) - by_degree.begin());
-      const double left = by_degree[peak - 1], centre = by_degree[peak],
-                   right = by_degree[peak + 1];
-      const double curvature = left - 2.0 * centre + right;
-      const double offset =
-          curvature < 0.0 ? std::clamp(0.5 * (left - right) / curvature, -0.5, 0.5) : 0.0;
-      Tried chosen;
-      chosen.pose = turned(tried[win].pose, peak - kColourStepDeg + offset);
-      chosen.correlation =
-          ColourCorrelation(reference_colours, pass_colours, points, normals, chosen.pose).first;
-      result.colour_correlation = chosen.correlation;
-      result.runner_up_colour_correlation = second;
-      result.colour_decided =
-          chosen.correlation >= kColourMinWin && chosen.correlation - second >= kColourMinMargin;
-      if (result.colour_decided) {
-        // Refined by the silhouettes from there (the symmetry leaves the turn to the colours),
-        // ahead of the poses it was chosen over.
-        Pose pose = Evaluate(fine, chosen.pose, threads);
-        for (const double pixels : {3.0, 1.5}) {
-          const Level narrowed = Narrowed(fine, pixels);
-          pose = Refine(narrowed, Evaluate(narrowed, pose.table_from_object, threads), c1, 12,
-                        threads, progress);
+      if (options.colour && !tried.empty()) {
+        std::size_t win = 0;
+        for (std::size_t t = 1; t < tried.size(); ++t)
+          if (tried[t].correlation > tried[win].correlation) win = t;
+        double second = -1.0;
+        for (const Tried& t : tried)
+          if (RotationDistanceDeg(t.pose.rotation, tried[win].pose.rotation) >= kColourDistinctDeg)
+            second = std::max(second, t.correlation);
+        // Within a step of the winner: by the degree, then the peak of a parabola through the
+        // best degree and its neighbours.
+        std::vector<double> by_degree(2 * kColourStepDeg + 1);
+        for (int deg = -kColourStepDeg; deg <= kColourStepDeg; ++deg)
+          by_degree[deg + kColourStepDeg] =
+              deg == 0 ? tried[win].correlation : correlation(turned(tried[win].pose, deg)).first;
+        const auto peak = static_cast<int>(
+            std::max_element(by_degree.begin() + 1, by_degree.end() - 1) - by_degree.begin());
+        const double left = by_degree[peak - 1], centre = by_degree[peak],
+                     right = by_degree[peak + 1];
+        const double curvature = left - 2.0 * centre + right;
+        const double offset =
+            curvature < 0.0 ? std::clamp(0.5 * (left - right) / curvature, -0.5, 0.5) : 0.0;
+        const Rigid3d chosen = turned(tried[win].pose, peak - kColourStepDeg + offset);
+        result.colour_correlation = correlation(chosen).first;
+        result.runner_up_colour_correlation = second;
+        result.colour_decided = !start && result.colour_correlation >= kColourMinWin &&
+                                result.colour_correlation - second >= kColourMinMargin;
+        // From the operator's pose the colours place the turn whenever they are known there.
+        if (result.colour_decided || (start && result.colour_correlation > -1.0)) {
+          // Refined by the silhouettes from there, ahead of the poses it was chosen over. Where
+          // the silhouettes fit the pose turned a little either way too (a bottle), they cannot
+          // tell its turn, and their residual's slight slope would carry it off: the turn stays
+          // the colours'.
+          const double chosen_rms = Evaluate(fine, chosen, threads).rms;
+          bool free_turn = true;
+          for (const double deg : {-10.0, 10.0})
+            free_turn = free_turn && Evaluate(fine, turned(chosen, deg), threads).rms <
+                                         options.ambiguity_ratio * chosen_rms;
+          if (free_turn) turn_set = chosen;
+          Pose pose = Evaluate(fine, chosen, threads);
+          for (const double pixels : {3.0, 1.5}) {
+            const Level narrowed = Narrowed(fine, pixels);
+            pose = Refine(narrowed, Evaluate(narrowed, pose.table_from_object, threads), c1, 12,
+                          threads, progress);
+          }
+          pose = Evaluate(
+              fine,
+              turn_set ? WithTurnOf(pose.table_from_object, *turn_set, c1) : pose.table_from_object,
+              threads);
+          candidates.insert(candidates.begin(), pose);
+          best_refined_rms = pose.rms;
         }
-        pose = Evaluate(fine, pose.table_from_object, threads);
-        candidates.insert(candidates.begin(), pose);
-        best_refined_rms = pose.rms;
       }
       result.seconds_colour = colour_watch.ElapsedSeconds();
     }
@@ -772,7 +822,9 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
     Pose& best = candidates.front();
     best = CompassSearch(narrowed, Evaluate(narrowed, best.table_from_object, threads), c1,
                          2.0 * fine.pixel_m / radius, 2.0 * fine.pixel_m, 6, threads, progress);
-    best = Evaluate(fine, best.table_from_object, threads);
+    best = Evaluate(
+        fine, turn_set ? WithTurnOf(best.table_from_object, *turn_set, c1) : best.table_from_object,
+        threads);
   }
   result.seconds_refine = watch.ElapsedSeconds();
 
@@ -789,7 +841,7 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
         InconsistentFraction(untruncated, best.table_from_object, 3.0 * fine.pixel_m, threads);
   }
   result.matches = result.inconsistent_fraction <= options.max_inconsistent;
-  for (std::size_t k = 1; k < candidates.size(); ++k) {
+  for (std::size_t k = 1; k < candidates.size() && !start; ++k) {
     const double deg = RotationDistanceDeg(best.table_from_object.rotation,
                                            candidates[k].table_from_object.rotation);
     if (deg < options.distinct_deg) continue;
@@ -799,8 +851,147 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
     result.ambiguous = result.runner_up_ratio < options.ambiguity_ratio && !result.colour_decided;
     break;
   }
+  if (result.ambiguous) {
+    // For the operator: the tied poses, the likeliest first, each at least kColourDistinctDeg
+    // from every one before.
+    std::stable_sort(tried.begin(), tried.end(), [](const Tried& a, const Tried& b) {
+      return a.correlation != b.correlation ? a.correlation > b.correlation : a.rms < b.rms;
+    });
+    if (tried.empty()) tried.push_back({best.table_from_object, best.rms, -1.0});
+    for (const Tried& t : tried) {
+      if (static_cast<int>(result.alternatives.size()) >= kMaxAlternatives) break;
+      const bool near = std::any_of(
+          result.alternatives.begin(), result.alternatives.end(), [&](const PoseAlternative& a) {
+            return RotationDistanceDeg(a.table_from_object.rotation, t.pose.rotation) <
+                   kColourDistinctDeg;
+          });
+      if (!near)
+        result.alternatives.push_back(
+            {t.pose, t.rms / std::max(1e-12, best_refined_rms), t.correlation});
+    }
+  }
   result.seconds_total = total.ElapsedSeconds();
   return result;
+}
+
+std::vector<cv::Mat> PosePreviews(const std::vector<View>& reference, const std::vector<View>& pass,
+                                  const std::vector<Rigid3d>& poses, int side, int threads,
+                                  Progress& progress) {
+  CAROUSEL_THROW_IF(reference.size() < 2 || pass.size() < 2, InvalidArgument,
+                    "pose pictures need at least 2 views in each pass, got "
+                        << reference.size() << " and " << pass.size());
+  CAROUSEL_THROW_IF(side < 64, InvalidArgument, "pose pictures of " << side << " px: at least 64");
+  const Mesh hull = PassHull(reference, RegistrationOptions().max_side_px, threads, progress);
+  std::vector<Eigen::Vector3d> positions;
+  positions.reserve(hull.n_vertices());
+  for (const auto vertex : hull.vertices()) {
+    const auto& p = hull.point(vertex);
+    positions.emplace_back(p[0], p[1], p[2]);
+  }
+  std::vector<Eigen::Vector3i> triangles;
+  std::vector<Eigen::Vector3d> face_normals;
+  for (const auto face : hull.faces()) {
+    Eigen::Vector3i t;
+    int corner = 0;
+    for (const auto vertex : hull.fv_range(face)) t[corner++] = vertex.idx();
+    const Eigen::Vector3d n =
+        (positions[t[1]] - positions[t[0]]).cross(positions[t[2]] - positions[t[0]]);
+    triangles.push_back(t);
+    face_normals.push_back(n.norm() > 0.0 ? Eigen::Vector3d(n.normalized()) : n);
+  }
+  // Two photos of the reference from opposite sides, at four times the pictures' detail: each
+  // picture shows the product's box, enlarged.
+  const int detail = 4 * side;
+  const std::vector<ColourView> shown =
+      ColourViews({reference.front(), reference[reference.size() / 2]}, threads, detail);
+  const std::vector<ColourView> pass_colours = ColourViews(pass, threads, detail);
+  // Per shown photo, the product's box in it, and the hull's surface point and normal under
+  // each pixel of the box (none: NaN).
+  struct Surface {
+    cv::Rect box;
+    cv::Mat point, normal;  // CV_64FC3, the box's size
+  };
+  std::vector<Surface> surfaces;
+  for (const ColourView& view : shown) {
+    progress.CheckCancelled();
+    Eigen::AlignedBox2d bounds;
+    for (const Eigen::Vector3d& p : positions)
+      if (const auto pixel = view.camera.Project(p)) bounds.extend(*pixel);
+    cv::Rect box(0, 0, view.image.cols, view.image.rows);
+    if (!bounds.isEmpty()) {
+      const double margin = 0.08 * bounds.sizes().maxCoeff() + 2.0;
+      box &= cv::Rect(cv::Point(static_cast<int>(std::floor(bounds.min().x() - margin)),
+                                static_cast<int>(std::floor(bounds.min().y() - margin))),
+                      cv::Point(static_cast<int>(std::ceil(bounds.max().x() + margin)),
+                                static_cast<int>(std::ceil(bounds.max().y() + margin))));
+    }
+    if (box.empty()) box = cv::Rect(0, 0, view.image.cols, view.image.rows);
+    MeshRasterOptions raster_options;
+    raster_options.threads = threads;
+    const MeshRaster raster = RasterizeMesh(positions, triangles, view.camera, raster_options);
+    Surface surface{box, cv::Mat(box.size(), CV_64FC3, cv::Scalar::all(std::nan(""))),
+                    cv::Mat(box.size(), CV_64FC3, cv::Scalar::all(0.0))};
+    const cv::Mat ids = raster.FaceIds();
+    for (int y = box.y; y < box.y + box.height; ++y) {
+      for (int x = box.x; x < box.x + box.width; ++x) {
+        const int face = ids.at<int>(y, x);
+        if (face < 0) continue;
+        for (const RasterFragment& f : raster.Fragments(x, y)) {
+          if (f.face != face) continue;
+          const Eigen::Vector3i& t = triangles[static_cast<std::size_t>(face)];
+          const Eigen::Vector3d point = f.barycentric.x() * positions[t[0]] +
+                                        f.barycentric.y() * positions[t[1]] +
+                                        f.barycentric.z() * positions[t[2]];
+          const Eigen::Vector3d& n = face_normals[static_cast<std::size_t>(face)];
+          surface.point.at<cv::Vec3d>(y - box.y, x - box.x) =
+              cv::Vec3d(point.x(), point.y(), point.z());
+          surface.normal.at<cv::Vec3d>(y - box.y, x - box.x) = cv::Vec3d(n.x(), n.y(), n.z());
+          break;
+        }
+      }
+    }
+    surfaces.push_back(surface);
+  }
+  // An image fitted into a side x side tile (the off-hull grey around it).
+  auto tile = [side](const cv::Mat& image) {
+    cv::Mat out(side, side, CV_8UC3, cv::Scalar::all(48));
+    const double scale = static_cast<double>(side) / std::max(image.cols, image.rows);
+    const cv::Size size(std::clamp(static_cast<int>(std::lround(image.cols * scale)), 1, side),
+                        std::clamp(static_cast<int>(std::lround(image.rows * scale)), 1, side));
+    cv::Mat resized;
+    cv::resize(image, resized, size, 0, 0, scale < 1.0 ? cv::INTER_AREA : cv::INTER_LINEAR);
+    resized.copyTo(
+        out(cv::Rect((side - size.width) / 2, (side - size.height) / 2, size.width, size.height)));
+    return out;
+  };
+  std::vector<cv::Mat> previews(poses.size());
+  ParallelFor(poses.size(), 1, threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t k = begin; k < end; ++k) {
+      std::vector<cv::Mat> rows;
+      for (std::size_t v = 0; v < shown.size(); ++v) {
+        const Surface& surface = surfaces[v];
+        cv::Mat laid(surface.box.size(), CV_8UC3, cv::Scalar::all(48));
+        for (int y = 0; y < laid.rows; ++y) {
+          for (int x = 0; x < laid.cols; ++x) {
+            const cv::Vec3d& p = surface.point.at<cv::Vec3d>(y, x);
+            if (std::isnan(p[0])) continue;
+            const cv::Vec3d& n = surface.normal.at<cv::Vec3d>(y, x);
+            const auto colour = ColourAt(pass_colours, poses[k] * Eigen::Vector3d(p[0], p[1], p[2]),
+                                         poses[k].rotation * Eigen::Vector3d(n[0], n[1], n[2]));
+            cv::Vec3b& out = laid.at<cv::Vec3b>(y, x);
+            out = cv::Vec3b(96, 96, 96);
+            if (colour)
+              for (int c = 0; c < 3; ++c) out[c] = cv::saturate_cast<std::uint8_t>((*colour)[c]);
+          }
+        }
+        cv::Mat row;
+        cv::hconcat(tile(shown[v].image(surface.box)), tile(laid), row);
+        rows.push_back(row);
+      }
+      cv::vconcat(rows, previews[k]);
+    }
+  });
+  return previews;
 }
 
 }  // namespace carousel::recon

@@ -19,12 +19,17 @@
 // `ambiguity_ratio` of the best makes the registration ambiguous (a nearly symmetric product):
 // it is reported, never silently accepted, unless the photos' colours tell the poses apart
 // (a symmetric bottle's label): the pose where the two passes' photos agree clearly better
-// in colour at the first pass's hull points is taken, and the result says so.
+// in colour at the first pass's hull points is taken, and the result says so. An ambiguous
+// result lists the poses the silhouettes fit alike (`alternatives`, at least 30 deg apart),
+// with pictures to tell them apart (PosePreviews): the operator chooses one, and registration
+// started from it (RegisterPass's `start`) refines it without searching.
 // Units: metres; frames as View cameras say (reference: the object frame, pass: its table's).
 #pragma once
 
 #include <optional>
 #include <vector>
+
+#include <opencv2/core.hpp>
 
 #include "carousel/core/options.h"
 #include "carousel/core/progress.h"
@@ -62,6 +67,13 @@ struct RegistrationOptions {
   void Validate() const;
 };
 
+// A pose the silhouettes fit nearly as well as the best (an ambiguous registration).
+struct PoseAlternative {
+  Rigid3d table_from_object;
+  double residual_ratio = 1.0;       // its residual / the best's
+  double colour_correlation = -1.0;  // the passes' colours agree so well there (-1: not known)
+};
+
 struct RegistrationResult {
   // The pass's turntable frame from the reference's (the object) frame.
   Rigid3d table_from_object;
@@ -80,6 +92,11 @@ struct RegistrationResult {
   double runner_up_ratio = 0.0;  // the runner-up's residual / the best's (0: none)
   double runner_up_deg = 0.0;    // its rotation's distance from the best's
   std::optional<Rigid3d> runner_up;
+  // When ambiguous: the poses the silhouettes fit alike, at least 30 deg apart, the likeliest
+  // first (the best colour agreement, else the smallest residual), at most 12.
+  std::vector<PoseAlternative> alternatives;
+  // Started from the operator's pose (RegisterPass's `start`): never ambiguous.
+  bool started = false;
   // Poses the silhouettes fit alike, told apart by colour (options.colour): the correlation
   // of the passes' colours at the chosen pose and at the best other tied pose (-1: too few
   // points seen by both passes), the points compared, and whether colour decided the pose.
@@ -93,11 +110,25 @@ struct RegistrationResult {
          seconds_total = 0.0;
 };
 
+// With `start` (the operator's choice among an ambiguous result's alternatives) nothing is
+// searched: the pose is refined from there, by the silhouettes and, within 30 deg of its turn
+// about the upright axis, by the photos' colours (options.colour).
 // \pre every view has a mask (View::Mask()); at least 2 views in each pass.
 // \throw InvalidArgument (too few views, no mask, bad options), FormatError (an empty
 //        silhouette, naming the view; a pass whose own silhouettes carve nothing), Cancelled.
 RegistrationResult RegisterPass(const std::vector<View>& reference, const std::vector<View>& pass,
-                                const RegistrationOptions& options, Progress& progress);
+                                const RegistrationOptions& options, Progress& progress,
+                                const std::optional<Rigid3d>& start = std::nullopt);
+
+// Pictures for choosing among poses, one per pose: two photos of the reference from opposite
+// sides, each beside the pass's photos' colours laid onto the reference's visual hull at that
+// pose and seen from the same camera (grey where no photo of the pass sees the surface
+// frontally, darker off the hull). At the right pose the two sides of a row look alike. CV_8UC3,
+// each photo at most `side` pixels long. \pre every view has an image and a mask; at least 2 views
+// in each pass; side >= 64. \throw as RegisterPass.
+std::vector<cv::Mat> PosePreviews(const std::vector<View>& reference, const std::vector<View>& pass,
+                                  const std::vector<Rigid3d>& poses, int side, int threads,
+                                  Progress& progress);
 
 // The angle of the rotation that takes a to b, degrees.
 double RotationDistanceDeg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b);
