@@ -248,6 +248,37 @@ int main(int argc, char** argv) {
           "one, %d points; %.2f s\n",
           found.colour_decided ? "decided the pose" : "undecided", found.colour_correlation,
           found.runner_up_colour_correlation, found.colour_points, found.seconds_colour);
+    if (status == "ambiguous") {
+      // The operator looks at the pictures and chooses; here: the pose offered nearest the truth.
+      const studio::Session listed = studio::ReadSession(folder);
+      const std::vector<Rigid3d>& choices = listed.passes.at(1).pose_choices;
+      std::size_t nearest = 0;
+      for (std::size_t k = 1; k < choices.size(); ++k)
+        if (recon::RotationDistanceDeg(choices[k].rotation, true_pose.rotation) <
+            recon::RotationDistanceDeg(choices[nearest].rotation, true_pose.rotation))
+          nearest = k;
+      studio::ReconstructOptions options;
+      options.choose_pose = "2:" + std::to_string(nearest + 1);
+      studio::Session again = studio::ReadSession(folder);
+      const studio::ReconstructResult chosen =
+          studio::ReconstructSession(folder, again, options, progress);
+      if (!choices.empty() && !chosen.passes.empty() && chosen.passes[0].registration) {
+        const recon::RegistrationResult& from = *chosen.passes[0].registration;
+        std::printf(
+            "  the operator's choice: pose %zu of %zu (%.1f deg off): %s, rotation error %.3f "
+            "deg, surface moved %.3f mm; %.2f s\n",
+            nearest + 1, choices.size(),
+            recon::RotationDistanceDeg(choices[nearest].rotation, true_pose.rotation),
+            chosen.passes[0].status.c_str(),
+            recon::RotationDistanceDeg(from.table_from_object.rotation, true_pose.rotation),
+            1e3 * Displacement(truth, from.table_from_object, true_pose),
+            chosen.seconds_registration);
+        if (chosen.passes[0].status == "registered") {
+          found = from;
+          status = "registered";
+        }
+      }
+    }
     std::fflush(stdout);
     if (model && status == "registered") {
       const double truth_volume = SignedVolume(truth);

@@ -109,7 +109,7 @@ void AddProcessCommand(CLI::App& command, Dispatch& dispatch) {
   command.add_option("sessions", args->sessions, "session folders")->required();
   command.add_flag("--force", args->options.force, "run every stage, current or not");
   AddOptionFlags(&command, args->options.reconstruct,
-                 studio::ReconstructOptions::Fields().Only({"faces"}));
+                 studio::ReconstructOptions::Fields().Only({"faces", "choose-pose"}));
   AddOptionFlags(&command, args->options.texture, ProcessTextureFields());
   // Each texture or publish flag changes what it names; the rest is as the session was last
   // processed (RecordedExcludedViews, RecordedPublishOptions).

@@ -46,6 +46,7 @@ std::string Describe(const ReconstructOptions& o) {
   const recon::SilhouetteOptions& s = o.silhouettes;
   const recon::VisualHullOptions& h = o.hull;
   const recon::MeshOptimizationOptions& m = o.mesh;
+  const recon::RegistrationOptions& r = o.registration;
   return Describer()("method", static_cast<int>(s.method))("noise", s.noise_threshold)(
              "chroma", s.chroma_threshold)("shadow", s.min_shadow_brightness)(
              "highlight", s.max_highlight_brightness)("plate", s.plate_radius_m)(
@@ -59,7 +60,10 @@ std::string Describe(const ReconstructOptions& o) {
              "lambda", m.taubin_lambda)("mu", m.taubin_mu)("remesh", m.remesh)(
              "remesh_iterations", m.remesh_iterations)("remesh_factor", m.remesh_face_factor)(
              "normal", m.max_normal_deviation_deg)("aspect", m.max_aspect_ratio)(
-             "volume", m.target_volume_m3)("max_deviation", o.max_outline_deviation_px)
+             "volume", m.target_volume_m3)("max_deviation", o.max_outline_deviation_px)(
+             "rotations", r.rotations)("candidates", r.candidates)("distinct", r.distinct_deg)(
+             "ambiguity", r.ambiguity_ratio)("inconsistent", r.max_inconsistent)(
+             "points", r.points)("registration_side", r.max_side_px)("by_colour", r.colour)
       .str();
 }
 
@@ -136,6 +140,10 @@ std::string ReconstructInputs(const std::filesystem::path& folder, const Session
       inputs << file << ' ' << file_sha << '\n';
     }
   }
+  // The operator's choices of pose (the option itself only records them in the session).
+  for (std::size_t pass = 1; pass < session.passes.size(); ++pass)
+    if (session.passes[pass].chosen_pose > 0)
+      inputs << "pass " << pass << " pose " << session.passes[pass].chosen_pose << '\n';
   inputs << Describe(options);
   return Sha256(inputs.str());
 }
@@ -184,6 +192,7 @@ ProcessResult ProcessSession(const std::filesystem::path& folder, Session& sessi
   ProcessResult result;
   // A mask edited by hand since the reconstruction is taken as given from now on.
   const std::vector<std::string> edited_masks = AdoptEditedMasks(folder, session);
+  ApplyPoseChoices(session, options.reconstruct.choose_pose);
   std::vector<std::string> changed_photos;
   const std::string recon_inputs =
       ReconstructInputs(folder, session, options.reconstruct, &changed_photos);

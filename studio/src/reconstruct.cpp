@@ -68,6 +68,8 @@ constexpr double kMinAgreementIoU = 0.8;
 constexpr int kDiagnosticSize = 1600;
 
 constexpr const char* kDiagnosticsFolder = "recon/diagnostics";
+// The pictures an ambiguous pass's poses are chosen by: each photo at most this long, pixels.
+constexpr int kPosePictureSide = 480;
 
 // Per named view, recon/diagnostics/<photo>.jpg: the photo with its silhouette's outline (red)
 // and, when there is one, the hull's (green), at most kDiagnosticSize pixels along its longest
@@ -236,11 +238,49 @@ std::string Millimetres(double metres) {
   return text.str();
 }
 
+// The pictures an ambiguous pass's poses are chosen by: recon/pass<N>_pose<K>.jpg (N, K
+// 1-based; the pass's older pictures go). Returns their names for people.
+std::string WritePosePictures(const std::filesystem::path& folder, int pass,
+                              const std::vector<View>& reference, const std::vector<View>& moved,
+                              const std::vector<Rigid3d>& poses, const ReconstructOptions& options,
+                              Progress& progress) {
+  const std::string stem = "pass" + std::to_string(pass + 1) + "_pose";
+  std::filesystem::create_directories(folder / "recon");
+  for (const auto& entry : std::filesystem::directory_iterator(folder / "recon"))
+    if (entry.path().filename().string().starts_with(stem)) std::filesystem::remove(entry.path());
+  const std::vector<cv::Mat> pictures = recon::PosePreviews(
+      reference, moved, poses, kPosePictureSide, options.hull.threads, progress);
+  for (std::size_t k = 0; k < pictures.size(); ++k)
+    WriteImage(folder / "recon" / (stem + std::to_string(k + 1) + ".jpg"), pictures[k],
+               {.jpeg_quality = 90});
+  return "recon/" + stem + "1.jpg to " + stem + std::to_string(pictures.size()) + ".jpg";
+}
+
+// "PASS:POSE[,PASS:POSE...]" as (pass, pose) pairs, both 1-based. \throw InvalidArgument.
+std::vector<std::pair<int, int>> ParsePoseChoices(const std::string& text) {
+  std::vector<std::pair<int, int>> choices;
+  std::istringstream in(text);
+  std::string item;
+  while (std::getline(in, item, ',')) {
+    int pass = 0, pose = 0;
+    char colon = 0;
+    std::istringstream one(item);
+    if (!(one >> pass >> colon >> pose) || colon != ':' || !(one >> std::ws).eof() || pass < 2 ||
+        pose < 1)
+      throw InvalidArgument("--choose-pose: '" + item +
+                            "' is not PASS:POSE (a later pass, 2 or more, and a pose, 1 or more; "
+                            "e.g. 2:3)");
+    choices.emplace_back(pass, pose);
+  }
+  return choices;
+}
+
 // Registers every later pass to pass 0 (views: every photo in its own table frame, masks
 // set), records the outcome in the session, and maps the registered passes' cameras into the
 // object frame. Returns the outcomes; a pass that is not registered (out of frame, another
 // product, an ambiguous pose) is named with the reason and left out of the model.
-std::vector<PassOutcome> RegisterPasses(const Session& session_in, Session& session,
+std::vector<PassOutcome> RegisterPasses(const std::filesystem::path& folder,
+                                        const Session& session_in, Session& session,
                                         std::vector<View>& views,
                                         const std::map<int, std::string>& silhouettes_failed,
                                         const ReconstructOptions& options, Progress& progress) {
@@ -266,6 +306,12 @@ std::vector<PassOutcome> RegisterPasses(const Session& session_in, Session& sess
     if (!silhouettes_failed.contains(pass))
       for (const std::size_t i : which) moved.push_back(views[i]);
     record.table_from_object.reset();
+    // The operator's choice among the poses an earlier run found alike.
+    std::optional<Rigid3d> start;
+    if (record.chosen_pose > 0 &&
+        record.chosen_pose <= static_cast<int>(record.pose_choices.size()))
+      start = record.pose_choices[static_cast<std::size_t>(record.chosen_pose - 1)];
+    if (!start) record.pose_choices.clear();
     if (unregistered > 0) {
       // The passes reach the model in order (SessionViews).
       outcome.status = "failed";
@@ -282,13 +328,16 @@ std::vector<PassOutcome> RegisterPasses(const Session& session_in, Session& sess
         recon::RegistrationOptions registration = options.registration;
         registration.threads = options.hull.threads;
         const recon::RegistrationResult found =
-            recon::RegisterPass(reference, moved, registration, progress);
+            recon::RegisterPass(reference, moved, registration, progress, start);
         outcome.registration = found;
         std::ostringstream note;
         note << name << ": residual " << std::fixed << std::setprecision(2) << found.residual_px
              << " px (" << Millimetres(found.residual_m) << "), " << std::setprecision(0)
              << 100.0 * found.inconsistent_fraction
              << "% of the hulls' points outside the other pass's silhouettes";
+        if (start)
+          note << ", from the pose the operator chose (" << record.chosen_pose << " of "
+               << record.pose_choices.size() << ")";
         if (found.runner_up)
           note << ", the next pose " << std::setprecision(1) << found.runner_up_deg
                << " deg away fits " << std::setprecision(2) << found.runner_up_ratio
@@ -298,6 +347,9 @@ std::vector<PassOutcome> RegisterPasses(const Session& session_in, Session& sess
                   "one (they agree with a correlation of "
                << std::setprecision(2) << found.colour_correlation << " there, at most "
                << found.runner_up_colour_correlation << " at the others)";
+        else if (found.started && found.colour_points > 0)
+          note << "; near it the photos' colours agree best (correlation " << std::setprecision(2)
+               << found.colour_correlation << ")";
         else if (found.colour_points > 0)
           note << "; nor do the photos' colours tell the poses apart (correlation "
                << std::setprecision(2) << found.colour_correlation << " against "
@@ -310,10 +362,21 @@ std::vector<PassOutcome> RegisterPasses(const Session& session_in, Session& sess
                          "colour of the backdrop: take backlit mask shots)";
         } else if (found.ambiguous) {
           outcome.status = "ambiguous";
-          outcome.note = note.str() +
-                         ": the pose is ambiguous, the product's silhouettes look alike turned "
-                         "(a symmetric product); lay it down so that it does not look alike, "
-                         "or leave the pass out";
+          for (const recon::PoseAlternative& alternative : found.alternatives)
+            record.pose_choices.push_back(alternative.table_from_object);
+          const std::string pictures = WritePosePictures(folder, pass, reference, moved,
+                                                         record.pose_choices, options, progress);
+          std::ostringstream choose;
+          choose << ": the pose is ambiguous, the product's silhouettes look alike turned (a "
+                    "symmetric product). Choose the pose: "
+                 << pictures << " show pass 1's photos beside pass " << pass + 1
+                 << "'s colours laid on its shape at each of " << record.pose_choices.size()
+                 << " poses; where the two sides of each row look alike, the pose is right: "
+                    "choose it (carousel process "
+                 << folder.string() << " --choose-pose " << pass + 1
+                 << ":K, or the picture's button in the window). Or lay the product down so "
+                    "that it does not look alike, or leave the pass out";
+          outcome.note = note.str() + choose.str();
         } else {
           outcome.status = "registered";
           outcome.note = note.str();
@@ -380,7 +443,13 @@ const OptionTable<ReconstructOptions>& ReconstructOptions::Fields() {
                 .unit = "px",
                 .min = 0,
                 .special = 0,
-                .special_meaning = "never"});
+                .special_meaning = "never"})
+          .Add(&ReconstructOptions::choose_pose,
+               {.name = "choose-pose",
+                .help = "for a pass whose pose was ambiguous, the pose its pictures show right: "
+                        "PASS:POSE[,PASS:POSE...], e.g. 2:3 for recon/pass2_pose3.jpg (kept in "
+                        "the session)",
+                .advanced = true});
   return table;
 }
 
@@ -390,6 +459,33 @@ void ReconstructOptions::Validate() const {
   mesh.Validate();
   registration.Validate();
   Fields().Check(*this);
+  ParsePoseChoices(choose_pose);
+}
+
+bool ApplyPoseChoices(Session& session, const std::string& choices) {
+  bool changed = false;
+  for (const auto& [pass, pose] : ParsePoseChoices(choices)) {
+    const std::string given =
+        "--choose-pose " + std::to_string(pass) + ":" + std::to_string(pose) + ": ";
+    if (pass > static_cast<int>(session.passes.size()))
+      throw InvalidArgument(given + "the session has " + std::to_string(session.passes.size()) +
+                            " pass(es)");
+    SessionPass& record = session.passes[static_cast<std::size_t>(pass - 1)];
+    const std::string name = "pass " + std::to_string(pass) + " (" + record.orientation + ")";
+    if (record.pose_choices.empty())
+      throw InvalidArgument(
+          given + name + " has no poses to choose from: only a pass whose pose " +
+          "was found ambiguous has (it is " +
+          (record.registration.empty() ? "not registered yet" : record.registration) + ")");
+    const int count = static_cast<int>(record.pose_choices.size());
+    if (pose > count)
+      throw InvalidArgument(given + name + " has " + std::to_string(count) +
+                            " poses to choose from (recon/pass" + std::to_string(pass) +
+                            "_pose1.jpg to _pose" + std::to_string(count) + ".jpg)");
+    changed = changed || record.chosen_pose != pose;
+    record.chosen_pose = pose;
+  }
+  return changed;
 }
 
 ReconstructResult ReconstructSession(const std::filesystem::path& session_folder,
@@ -406,6 +502,7 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
     throw FormatError(session_folder / kManifestName,
                       "a reconstruction needs at least 2 views, the session has " +
                           std::to_string(session.views.size()));
+  ApplyPoseChoices(session, requested.choose_pose);
   ReconstructOptions options = requested;
   if (session.frame != "turntable") {
     // Not on our turntable: no plate to remove, no floor to stand on.
@@ -469,7 +566,8 @@ ReconstructResult ReconstructSession(const std::filesystem::path& session_folder
   if (HasSeveralPasses(session)) {
     watch.Restart();
     const Session before = session;
-    result.passes = RegisterPasses(before, session, views, silhouettes_failed, options, progress);
+    result.passes = RegisterPasses(session_folder, before, session, views, silhouettes_failed,
+                                   options, progress);
     std::size_t used = 0;
     while (used < views.size() &&
            (session.views[used].pass == 0 ||

@@ -77,6 +77,12 @@ void WriteSessionManifest(const std::filesystem::path& folder, const Session& se
       if (!pass.registration_note.empty()) entry["registration_note"] = pass.registration_note;
       if (pass.table_from_object)
         entry["table_from_object"] = Rigid3dToJson(*pass.table_from_object);
+      if (!pass.pose_choices.empty()) {
+        json choices = json::array();
+        for (const Rigid3d& pose : pass.pose_choices) choices.push_back(Rigid3dToJson(pose));
+        entry["pose_choices"] = choices;
+      }
+      if (pass.chosen_pose > 0) entry["chosen_pose"] = pass.chosen_pose;
       passes.push_back(entry);
     }
     manifest["passes"] = passes;
@@ -157,6 +163,13 @@ Session ReadSession(const std::filesystem::path& folder) {
       pass.registration_note = entry.OptionalString("registration_note").value_or("");
       if (const auto pose = entry.OptionalObject("table_from_object"))
         pass.table_from_object = Rigid3dFromJson(*pose);
+      if (entry.Has("pose_choices"))
+        for (const JsonReader& pose : entry.Array("pose_choices"))
+          pass.pose_choices.push_back(Rigid3dFromJson(pose));
+      pass.chosen_pose = entry.OptionalInt("chosen_pose").value_or(0);
+      if (pass.chosen_pose < 0 || pass.chosen_pose > static_cast<int>(pass.pose_choices.size()))
+        entry.Fail("chosen_pose must be 1.." + std::to_string(pass.pose_choices.size()) +
+                   " (a pose of pose_choices) or 0, got " + std::to_string(pass.chosen_pose));
       if (pass.registration != "" && pass.registration != "registered" &&
           pass.registration != "ambiguous" && pass.registration != "failed")
         entry.Fail("registration must be registered, ambiguous or failed, got '" +

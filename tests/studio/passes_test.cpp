@@ -9,6 +9,7 @@
 
 #include "carousel/core/error.h"
 #include "carousel/recon/registration.h"
+#include "carousel/studio/pipeline.h"
 #include "carousel/studio/reconstruct.h"
 #include "carousel/studio/session.h"
 #include "carousel/studio/sim_capture.h"
@@ -161,6 +162,91 @@ TEST(PassesTest, ASecondPassOutOfFrameIsNamedAndLeftOut) {
   const TextureSessionResult textured = TextureSession(dir / "shoe", {}, progress);
   EXPECT_EQ(textured.views, 8);
   EXPECT_TRUE(textured.warnings.empty()) << textured.warnings.front();
+}
+
+// A bottle laid on its side fits alike turned about its axis. Without the colours' help the
+// pass is ambiguous: left out, with the poses to choose among and their pictures; the
+// operator's choice registers it, stays in the session and makes the stage current again.
+TEST(PassesTest, AnAmbiguousPassIsRegisteredFromThePoseTheOperatorChooses) {
+  TempDir dir;
+  Progress progress;
+  SimulateCapture(TwoPasses("bottle"), dir / "bottle", progress);
+  Session session = ReadSession(dir / "bottle");
+  ReconstructOptions options;
+  options.registration.colour = false;
+  const ReconstructResult ambiguous =
+      ReconstructSession(dir / "bottle", session, options, progress);
+  ASSERT_EQ(ambiguous.passes.size(), 1u);
+  std::printf("%s\n", ambiguous.passes[0].note.c_str());
+  ASSERT_EQ(ambiguous.passes[0].status, "ambiguous") << ambiguous.passes[0].note;
+  EXPECT_EQ(ambiguous.model_views, 8);
+  const Session listed = ReadSession(dir / "bottle");
+  const std::vector<Rigid3d>& choices = listed.passes[1].pose_choices;
+  ASSERT_GE(choices.size(), 2u);
+  EXPECT_EQ(listed.passes[1].chosen_pose, 0);
+  EXPECT_NE(ambiguous.passes[0].note.find("--choose-pose 2:K"), std::string::npos);
+  for (std::size_t k = 1; k <= choices.size(); ++k)
+    EXPECT_TRUE(std::filesystem::is_regular_file(dir / "bottle" / "recon" /
+                                                 ("pass2_pose" + std::to_string(k) + ".jpg")))
+        << k;
+  EXPECT_FALSE(std::filesystem::exists(
+      dir / "bottle" / "recon" / ("pass2_pose" + std::to_string(choices.size() + 1) + ".jpg")));
+
+  // What cannot be chosen is named.
+  auto refused = [&](const std::string& choice) {
+    Session copy = listed;
+    try {
+      ReconstructOptions bad;
+      bad.choose_pose = choice;
+      bad.Validate();
+      ApplyPoseChoices(copy, choice);
+    } catch (const InvalidArgument& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  EXPECT_NE(refused("2:" + std::to_string(choices.size() + 1))
+                .find("has " + std::to_string(choices.size()) + " poses"),
+            std::string::npos);
+  EXPECT_NE(refused("3:1").find("the session has 2 pass(es)"), std::string::npos);
+  EXPECT_NE(refused("1:1").find("is not PASS:POSE"), std::string::npos);
+  EXPECT_NE(refused("2-1").find("is not PASS:POSE"), std::string::npos);
+
+  // The operator picks the pose whose picture looks right (here: the one nearest the truth).
+  const Rigid3d& truth = listed.ground_truth.table_from_object[1];
+  std::size_t right = 0;
+  for (std::size_t k = 1; k < choices.size(); ++k)
+    if (recon::RotationDistanceDeg(choices[k].rotation, truth.rotation) <
+        recon::RotationDistanceDeg(choices[right].rotation, truth.rotation))
+      right = k;
+  ReconstructOptions chosen;
+  chosen.choose_pose = "2:" + std::to_string(right + 1);
+  Session again = ReadSession(dir / "bottle");
+  const ReconstructResult result = ReconstructSession(dir / "bottle", again, chosen, progress);
+  ASSERT_EQ(result.passes.size(), 1u);
+  std::printf("%s\n", result.passes[0].note.c_str());
+  ASSERT_EQ(result.passes[0].status, "registered") << result.passes[0].note;
+  EXPECT_NE(result.passes[0].note.find("the operator chose (" + std::to_string(right + 1) + " of " +
+                                       std::to_string(choices.size()) + ")"),
+            std::string::npos);
+  EXPECT_EQ(result.model_views, 16);
+  const double error = recon::RotationDistanceDeg(
+      result.passes[0].registration->table_from_object.rotation, truth.rotation);
+  std::printf("offered %.1f deg off, registered %.2f deg off\n",
+              recon::RotationDistanceDeg(choices[right].rotation, truth.rotation), error);
+  EXPECT_LT(error, 3.0);  // measured 0.9 from a pose 17.7 deg off
+  const Session kept = ReadSession(dir / "bottle");
+  EXPECT_EQ(kept.passes[1].registration, "registered");
+  EXPECT_EQ(kept.passes[1].chosen_pose, static_cast<int>(right) + 1);
+  EXPECT_EQ(kept.passes[1].pose_choices.size(), choices.size());
+  // The choice is the session's: without the option the stage's inputs are the same; another
+  // choice changes them.
+  EXPECT_EQ(ReconstructFingerprint(dir / "bottle", kept, chosen),
+            ReconstructFingerprint(dir / "bottle", kept, {}));
+  Session other = kept;
+  ApplyPoseChoices(other, "2:" + std::to_string(right == 0 ? 2 : 1));
+  EXPECT_NE(ReconstructFingerprint(dir / "bottle", other, {}),
+            ReconstructFingerprint(dir / "bottle", kept, {}));
 }
 
 TEST(PassesTest, TheManifestRefusesPassesOutOfOrderOrUnlisted) {

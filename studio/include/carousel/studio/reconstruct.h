@@ -31,6 +31,10 @@ struct ReconstructOptions {
   // A mesh whose outline deviates further than this from the silhouettes on average (pixels)
   // is made again with twice the faces, up to 8 x mesh.target_faces; 0 = never.
   double max_outline_deviation_px = 1.0;
+  // The operator's choice for ambiguous passes, "PASS:POSE[,PASS:POSE...]" (2:3 = pass 2 takes
+  // pose 3 of those recon/pass2_pose<K>.jpg show); recorded in the session (ApplyPoseChoices),
+  // so later runs keep it. Empty: none.
+  std::string choose_pose;
   // The silhouette, hull and mesh tables together (flag names are unique across them).
   static const OptionTable<ReconstructOptions>& Fields();
   void Validate() const;
@@ -73,6 +77,11 @@ struct ReconstructResult {
 // edited masks' paths; `session` and its manifest are updated. \throw IoError.
 std::vector<std::string> AdoptEditedMasks(const std::filesystem::path& session_folder,
                                           Session& session);
+
+// Records the operator's choices (ReconstructOptions::choose_pose) in `session`: each named
+// pass must have been found ambiguous (it lists pose_choices) and the pose must be one of them.
+// Returns whether anything changed. \throw InvalidArgument naming the pass and what is wrong.
+bool ApplyPoseChoices(Session& session, const std::string& choices);
 
 // Silhouettes come from the given masks (session views' given_mask), else from the backlit mask
 // shots when every view has one (method auto), else from the photos; masks/ receives the

@@ -93,6 +93,12 @@ struct SessionPass {
   std::string registration;
   std::string registration_note;  // the residual, or why it was not registered, for people
   std::optional<Rigid3d> table_from_object;  // set when "registered"
+  // Set when it was found "ambiguous": the poses the silhouettes fit alike, the likeliest first
+  // (their pictures: recon/pass<N>_pose<K>.jpg), for the operator to choose among.
+  std::vector<Rigid3d> pose_choices;
+  // The operator's choice among pose_choices, 1-based (0: none): the pass is registered from
+  // that pose, and pose_choices stay.
+  int chosen_pose = 0;
 };
 
 struct Session {
