@@ -97,9 +97,11 @@ void StudioApp::DrawJobMessage(const JobStatus& job) {
                         : std::optional<studio::ReconstructResult>();
       if (reconstructed) {
         ImGui::PushTextWrapPos(0.0f);
-        for (const studio::PassOutcome& pass : reconstructed->passes)
+        for (const studio::PassOutcome& pass : reconstructed->passes) {
           ImGui::TextColored(pass.status == "registered" ? kGreen : kRed, "%s%s",
                              pass.status == "registered" ? "" : "not used: ", pass.note.c_str());
+          if (pass.status == "ambiguous") DrawPoseChoice(job.session, pass.pass + 1);
+        }
         ImGui::PopTextWrapPos();
       }
       break;
@@ -115,6 +117,42 @@ void StudioApp::DrawJobMessage(const JobStatus& job) {
       ImGui::TextColored(kDim, "%s cancelled. %s", job.product.c_str(), job.advice.c_str());
       ImGui::PopTextWrapPos();
       break;
+  }
+}
+
+void StudioApp::DrawPoseChoice(const std::filesystem::path& session, int pass) {
+  if (pose_pictures_.session != session || pose_pictures_.pass != pass)
+    LoadPosePictures(session, pass);
+  if (!pose_pictures_.error.empty()) ImGui::TextColored(kRed, "%s", pose_pictures_.error.c_str());
+  if (pose_pictures_.textures.empty()) return;
+  ImGui::Text(
+      "Choose pass %d's pose: the picture whose two halves look alike (pass 1's photo, "
+      "pass %d's colours laid on the shape at that pose).",
+      pass, pass);
+  const float thumb = 128.0f;
+  const float right_edge = ImGui::GetWindowPos().x + ImGui::GetWindowContentRegionMax().x;
+  for (std::size_t k = 0; k < pose_pictures_.textures.size(); ++k) {
+    const cv::Size size = pose_pictures_.sizes[k];
+    const ImVec2 shown =
+        Fit(static_cast<float>(size.width), static_cast<float>(size.height), ImVec2(thumb, thumb));
+    ImGui::PushID(static_cast<int>(k));
+    ImGui::BeginGroup();
+    const bool chosen = ImGui::ImageButton(TextureId(pose_pictures_.textures[k]), shown);
+    if (ImGui::IsItemHovered()) {
+      ImGui::BeginTooltip();
+      ImGui::Image(TextureId(pose_pictures_.textures[k]),
+                   Fit(static_cast<float>(size.width), static_cast<float>(size.height),
+                       ImVec2(480.0f, 480.0f)));
+      ImGui::EndTooltip();
+    }
+    ImGui::Text("pose %zu", k + 1);
+    ImGui::EndGroup();
+    ImGui::PopID();
+    if (chosen) ChoosePose(session, pass, static_cast<int>(k) + 1);
+    // The next picture beside this one while it fits, else below.
+    const float next_right = ImGui::GetItemRectMax().x + ImGui::GetStyle().ItemSpacing.x + thumb +
+                             2.0f * ImGui::GetStyle().FramePadding.x;
+    if (k + 1 < pose_pictures_.textures.size() && next_right < right_edge) ImGui::SameLine();
   }
 }
 

@@ -19,6 +19,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "carousel/core/error.h"
+#include "carousel/core/image_io.h"
 #include "carousel/core/json.h"
 #include "carousel/core/logging.h"
 #include "carousel/studio/calibrate_session.h"
@@ -39,6 +40,19 @@ bool Ready(const std::future<T>& future) {
 void DeleteTexture(GLuint* texture) {
   if (*texture != 0) glDeleteTextures(1, texture);
   *texture = 0;
+}
+
+// The first pass of the job's reconstruction whose pose was ambiguous (1-based; 0: none).
+int AmbiguousPass(const JobStatus& job) {
+  if (job.state != JobState::kSucceeded) return 0;
+  const std::optional<studio::ReconstructResult>& reconstructed =
+      job.run       ? job.run->reconstruct
+      : job.process ? job.process->reconstruct
+                    : std::optional<studio::ReconstructResult>();
+  if (!reconstructed) return 0;
+  for (const studio::PassOutcome& pass : reconstructed->passes)
+    if (pass.status == "ambiguous") return pass.pass + 1;
+  return 0;
 }
 
 std::string StageLabel(const JobStatus& job) {
@@ -77,6 +91,7 @@ StudioApp::~StudioApp() {
   rig_.Disconnect();
   if (window_ != nullptr) {
     ClearThumbs();
+    ClearPosePictures();
     DeleteTexture(&live_view_);
     DeleteTexture(&held_out_photo_);
     DeleteTexture(&held_out_render_);
@@ -216,7 +231,10 @@ int StudioApp::Run() {
     if (autorun_waiting_model_ && model_frames_ >= 3) autorun_waiting_model_ = false;
     // The autorun is over once every product was pressed, the last session ended and its
     // model (or result) has been on screen for half a second.
-    if (args_.autorun && !autorun_done_ &&
+    // With --autorun-choose-pose, an ambiguous pass's pose is chosen first (Automate).
+    const bool pose_to_choose =
+        args_.autorun_pose > 0 && pose_check_ != PoseCheck::kChosen && AmbiguousPass(job) > 0;
+    if (args_.autorun && !autorun_done_ && !pose_to_choose &&
         autorun_next_ >= (args_.calibration ? 1 : args_.products.size()) &&
         !autorun_waiting_model_ && IdleFor(0.5)) {
       autorun_done_ = true;
@@ -260,6 +278,51 @@ void StudioApp::ForgetSessionView() {
   held_out_.reset();
   DeleteTexture(&held_out_photo_);
   DeleteTexture(&held_out_render_);
+}
+
+void StudioApp::ClearPosePictures() {
+  for (GLuint& texture : pose_pictures_.textures) DeleteTexture(&texture);
+  pose_pictures_ = {};
+}
+
+void StudioApp::LoadPosePictures(const std::filesystem::path& session, int pass) {
+  ClearPosePictures();
+  pose_pictures_.session = session;
+  pose_pictures_.pass = pass;
+  for (int pose = 1;; ++pose) {
+    const std::filesystem::path file =
+        session / "recon" /
+        ("pass" + std::to_string(pass) + "_pose" + std::to_string(pose) + ".jpg");
+    if (!std::filesystem::is_regular_file(file)) break;
+    try {
+      const cv::Mat bgr = ReadImage(file);
+      cv::Mat rgba;
+      cv::cvtColor(bgr, rgba, cv::COLOR_BGR2RGBA);
+      pose_pictures_.textures.push_back(UploadTexture(rgba, false));
+      pose_pictures_.sizes.push_back(rgba.size());
+    } catch (const Error& e) {
+      pose_pictures_.error = e.what();
+      break;
+    }
+  }
+}
+
+void StudioApp::ChoosePose(const std::filesystem::path& session, int pass, int pose) {
+  studio::ProcessOptions process;
+  process.reconstruct = args_.run.reconstruct;
+  process.reconstruct.choose_pose = std::to_string(pass) + ":" + std::to_string(pose);
+  process.texture = args_.run.texture;
+  process.publish = args_.run.publish;
+  process.publish_model = args_.run.publish_model;
+  start_error_.clear();
+  idle_frames_ = 0;
+  idle_since_ = Clock::now();
+  try {
+    rig_.Disconnect();
+    controller_.StartReprocess(session, process);
+  } catch (const Error& e) {
+    start_error_ = e.what();
+  }
 }
 
 void StudioApp::ClearThumbs() {
@@ -312,8 +375,9 @@ void StudioApp::StartHeldOutLoad(int view) {
 void StudioApp::Poll() {
   const JobStatus job = controller_.Status();
   if (job.id != last_job_id_) {
-    // A new job: the panels follow its session.
+    // A new job: the panels follow its session (the pose pictures are its own).
     last_job_id_ = job.id;
+    ClearPosePictures();
     if (job.session != session_) {
       ForgetSessionView();
       report_ = nlohmann::json();
@@ -479,6 +543,27 @@ void StudioApp::StartCalibration() {
 
 void StudioApp::Automate() {
   const std::size_t presses = args_.calibration ? 1 : args_.products.size();
+  // The photographer's choice of an ambiguous pass's pose: the pictures on screen a moment
+  // (a screenshot), then the button under picture K.
+  if (args_.autorun && args_.autorun_pose > 0 && autorun_next_ >= presses &&
+      pose_check_ != PoseCheck::kChosen && last_state_ != JobState::kRunning &&
+      !autorun_waiting_model_ && IdleFor(0.5)) {
+    const JobStatus job = controller_.Status();
+    if (const int pass = AmbiguousPass(job); pass > 0) {
+      if (pose_check_ == PoseCheck::kNone) {
+        shots_pending_.push_back("choose-pose");
+        pose_check_ = PoseCheck::kShown;
+        return;  // the screenshot is taken at the end of this frame; the choice follows
+      }
+      pose_check_ = PoseCheck::kChosen;
+      ChoosePose(job.session, pass, args_.autorun_pose);
+      if (!start_error_.empty()) {
+        failures_ = true;
+        if (args_.quit_when_done) quit_ = true;
+      }
+      return;
+    }
+  }
   if (!args_.autorun || autorun_next_ >= presses) return;
   if (last_state_ == JobState::kRunning || autorun_waiting_model_) return;
   // The first press once the window is up; the next once the last result has shown a while.

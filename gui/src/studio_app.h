@@ -69,6 +69,12 @@ class StudioApp {
   void DrawModelTab();
   void DrawPhotosTab();
   void DrawReportTab();
+  // An ambiguous pass's pose, chosen by the photographer: its pictures (recon/pass<N>_pose<K>
+  // .jpg) with a button under each, which reprocesses the session with that pose.
+  void DrawPoseChoice(const std::filesystem::path& session, int pass);
+  void LoadPosePictures(const std::filesystem::path& session, int pass);
+  void ClearPosePictures();
+  void ChoosePose(const std::filesystem::path& session, int pass, int pose);
 
   StudioArgs args_;
   GLFWwindow* window_ = nullptr;
@@ -142,6 +148,15 @@ class StudioApp {
   enum class LiveCheck { kNone, kWaiting, kShown } live_check_ = LiveCheck::kNone;
   std::chrono::steady_clock::time_point live_check_start_{};
   bool autorun_done_ = false;
+  // --autorun-choose-pose: the pictures shown (a screenshot), then the pose chosen.
+  enum class PoseCheck { kNone, kShown, kChosen } pose_check_ = PoseCheck::kNone;
+  struct PosePictures {
+    std::filesystem::path session;
+    int pass = 0;  // 1-based, as the pictures' names
+    std::vector<GLuint> textures;
+    std::vector<cv::Size> sizes;
+    std::string error;  // a picture that could not be read (names it)
+  } pose_pictures_;
   bool quit_ = false;
   std::ofstream frame_log_;
 };

@@ -22,6 +22,8 @@ struct Tables {
   const OptionTable<studio::PublishSessionOptions>& publish =
       studio::PublishSessionOptions::Fields();
   const OptionTable<studio::CalibrationPlan>& plan = studio::CalibrationPlan::Fields();
+  OptionTable<studio::ReconstructOptions> reconstruct =
+      studio::ReconstructOptions::Fields().Only({"pose-by-colour"});
 };
 
 const Tables& TheTables() {
@@ -115,6 +117,17 @@ StudioArgs ParseStudioArgs(const std::vector<std::string>& args) {
       out.calibration = true;
     } else if (name == "autorun") {
       out.autorun = true;
+    } else if (name == "autorun-choose-pose") {
+      const std::string text = value();
+      std::size_t used = 0;
+      try {
+        out.autorun_pose = std::stoi(text, &used);
+      } catch (const std::exception&) {
+        used = 0;
+      }
+      CAROUSEL_THROW_IF(
+          used == 0 || used != text.size() || out.autorun_pose < 1, InvalidArgument,
+          "--autorun-choose-pose needs a pose number, 1 or more, got '" << text << "'");
     } else if (name == "quit-when-done") {
       out.quit_when_done = true;
     } else if (name == "screenshot-dir") {
@@ -131,9 +144,11 @@ StudioArgs ParseStudioArgs(const std::vector<std::string>& args) {
       bool needs_value = false;
       std::string text;
       // Look the name up first without consuming a value (bools take none).
-      const bool known = SetFrom(tables.sim, out.run.sim, name, nullptr, &needs_value) ||
-                         SetFrom(tables.texture, out.run.texture, name, nullptr, &needs_value) ||
-                         SetFrom(tables.publish, out.run.publish, name, nullptr, &needs_value);
+      const bool known =
+          SetFrom(tables.sim, out.run.sim, name, nullptr, &needs_value) ||
+          SetFrom(tables.texture, out.run.texture, name, nullptr, &needs_value) ||
+          SetFrom(tables.publish, out.run.publish, name, nullptr, &needs_value) ||
+          SetFrom(tables.reconstruct, out.run.reconstruct, name, nullptr, &needs_value);
       CAROUSEL_THROW_IF(!known, InvalidArgument,
                         "unknown flag '" << arg << "' (carousel-studio --help lists them)");
       if (needs_value) {
@@ -177,6 +192,8 @@ std::string StudioUsage() {
          "  --autorun  press the button for each --product (with --calibration: run the "
          "calibration wizard)\n"
          "  --calibration  the calibration wizard's session (the board on the table)\n"
+         "  --autorun-choose-pose K  when a pass's pose is ambiguous, choose pose K (as the "
+         "button under its picture does)\n"
          "  --quit-when-done  exit when the autorun's sessions have ended\n"
          "  --screenshot-dir DIR  a PNG of the window at each stage change and at the end\n"
          "  --frame-log FILE  one frame time per line (ms)\n"
@@ -190,6 +207,7 @@ std::string StudioUsage() {
   AppendUsage(out, tables.sim, defaults.run.sim);
   AppendUsage(out, tables.texture, defaults.run.texture);
   AppendUsage(out, tables.publish, defaults.run.publish);
+  AppendUsage(out, tables.reconstruct, defaults.run.reconstruct);
   out << "\nCalibration (with --calibration):\n";
   AppendUsage(out, tables.plan, defaults.plan);
   return out.str();

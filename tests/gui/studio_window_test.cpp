@@ -7,6 +7,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <map>
@@ -177,6 +178,50 @@ TEST(StudioWindowTest, AutorunBuildsWhatCarouselRunBuildsAndShowsTheTexturedMode
   std::printf(
       "frame times while the pipeline ran: %d frames, p50 %.1f ms, p99 %.1f ms, max %.1f ms\n",
       frames.frames, frames.p50_ms, frames.p99_ms, frames.max_ms);
+}
+
+// A bottle on its side, without the colours' help: the second pass's pose is ambiguous, and the
+// window shows its pictures with a button under each; the autorun presses pose 2's as the
+// photographer would, and the session is reprocessed with the pass registered from that pose.
+TEST(StudioWindowTest, AnAmbiguousPassIsRegisteredFromThePictureThePhotographerChooses) {
+  testing::TempDir dir;
+  const testing::ShellResult window = RunWindow(
+      "--sim --scene bottle --orientations 2 --no-pose-by-colour --size 360x240 --views 6 "
+      "--no-publish --product bottle-1 --out " +
+      (dir / "s").string() +
+      " --autorun --autorun-choose-pose 2 --quit-when-done --screenshot-dir " +
+      (dir / "shots").string());
+  ASSERT_EQ(window.code, 0) << window.out;
+  const std::filesystem::path folder = dir / "s" / "bottle-1";
+  const studio::Session session = studio::ReadSession(folder);
+  ASSERT_EQ(session.passes.size(), 2u);
+  EXPECT_EQ(session.passes[1].registration, "registered") << session.passes[1].registration_note;
+  EXPECT_EQ(session.passes[1].chosen_pose, 2);
+  ASSERT_GE(session.passes[1].pose_choices.size(), 2u);
+  EXPECT_NE(session.passes[1].registration_note.find("the operator chose (2 of"), std::string::npos)
+      << session.passes[1].registration_note;
+  EXPECT_EQ(session.stages.at("texture"), "done");
+
+  // The pictures were on screen: the first one, as a button's thumbnail, found in the
+  // screenshot taken before the choice.
+  const std::filesystem::path shot = [&] {
+    for (const auto& s : Screenshots(dir / "shots"))
+      if (s.filename().string().find("choose-pose") != std::string::npos) return s;
+    return std::filesystem::path();
+  }();
+  ASSERT_FALSE(shot.empty());
+  const cv::Mat screen = cv::imread(shot.string());
+  const cv::Mat picture = cv::imread((folder / "recon" / "pass2_pose1.jpg").string());
+  ASSERT_FALSE(picture.empty());
+  const double scale = 128.0 / std::max(picture.cols, picture.rows);
+  cv::Mat thumb;
+  cv::resize(picture, thumb, cv::Size(), scale, scale, cv::INTER_AREA);
+  cv::Mat match;
+  cv::matchTemplate(screen, thumb, match, cv::TM_CCOEFF_NORMED);
+  double best = 0.0;
+  cv::minMaxLoc(match, nullptr, &best);
+  std::printf("pose picture 1 found in the window with a correlation of %.3f\n", best);
+  EXPECT_GT(best, 0.8);
 }
 
 TEST(StudioWindowTest, OperatorModeBuildsTwoProductsInARowOnePressEach) {

@@ -22,7 +22,10 @@ struct StudioArgs {
   // of a product session; the plan's fields (--board, --placements, ...) as `carousel run`.
   bool calibration = false;
   studio::CalibrationPlan plan;
-  bool autorun = false;                  // --autorun: press the button for each --product
+  bool autorun = false;  // --autorun: press the button for each --product
+  // --autorun-choose-pose K: when the autorun's session ends with a pass whose pose is
+  // ambiguous, choose its pose K as the photographer would (the button under picture K).
+  int autorun_pose = 0;
   bool quit_when_done = false;           // --quit-when-done: exit once the autorun's sessions end
   std::filesystem::path screenshot_dir;  // --screenshot-dir: a PNG per stage change and at the end
   std::filesystem::path frame_log;       // --frame-log: one frame time per line, ms
