@@ -38,6 +38,12 @@ constexpr double kColourDistinctDeg = 30.0;
 // From the operator's pose the colours try the turns within this many degrees of it (the
 // alternatives offered are kColourDistinctDeg apart, so one lies this close to the truth).
 constexpr int kColourStartDeg = 30;
+// The upright axis of a tied pose is found from its refined turns that are still turns about
+// an axis within kUprightAxisMaxTilt of upright, by at least kUprightAxisMinTurn (radians), and
+// is kept where it lies within this fraction of the product's size of the hull's centroid.
+constexpr double kUprightAxisMaxTilt = 3.0 * std::numbers::pi / 180.0;
+constexpr double kUprightAxisMinTurn = 30.0 * std::numbers::pi / 180.0;
+constexpr double kUprightAxisMaxOffset = 0.1;
 // An ambiguous result lists at most this many poses for the operator.
 constexpr int kMaxAlternatives = 12;
 
@@ -108,7 +114,14 @@ std::vector<Eigen::Vector3d> Subsample(const std::vector<Eigen::Vector3d>& point
 // The truncated distance (metres at the point) of `world` outside view's silhouette: 0 inside
 // and on the boundary, `truncation` where it lies behind the camera or outside the frame.
 double Outside(const LevelView& view, const Eigen::Vector3d& world, double truncation) {
-  const Eigen::Vector3d cam = view.camera.cam_from_world * world;
+  // Written out: under the sanitizers Eigen's product of a 3x3 matrix and a vector stays a
+  // chain of calls, and was most of the registration's time there.
+  const Eigen::Matrix3d& r = view.camera.cam_from_world.rotation;
+  const Eigen::Vector3d& t = view.camera.cam_from_world.translation;
+  const Eigen::Vector3d cam(
+      r(0, 0) * world.x() + r(0, 1) * world.y() + r(0, 2) * world.z() + t.x(),
+      r(1, 0) * world.x() + r(1, 1) * world.y() + r(1, 2) * world.z() + t.y(),
+      r(2, 0) * world.x() + r(2, 1) * world.y() + r(2, 2) * world.z() + t.z());
   if (cam.z() <= 1e-6) return truncation;
   const Eigen::Vector2d pixel = view.camera.ProjectFromCam(cam);
   const int w = view.outside.cols, h = view.outside.rows;
@@ -427,6 +440,50 @@ Rigid3d WithTurnOf(const Rigid3d& pose, const Rigid3d& reference, const Eigen::V
   return pose * Rigid3d(undo, centre - undo * centre);
 }
 
+// `pose` turned by `deg` about the object's upright axis through `axis` (object frame).
+Rigid3d TurnedAbout(const Rigid3d& pose, double deg, const Eigen::Vector3d& axis) {
+  const Eigen::Matrix3d r =
+      Eigen::AngleAxisd(deg * std::numbers::pi / 180.0, Eigen::Vector3d::UnitZ())
+          .toRotationMatrix();
+  return pose * Rigid3d(r, axis - r * axis);
+}
+
+// A point on the upright axis that `pose` is best turned about (object frame, at `centre`'s
+// height). The hull's centroid lies only near the axis of a product symmetric about it, and a
+// turn about a line a millimetre off moves the product by up to two: the silhouettes then tell
+// against a turn that is right (a bottle turned half round fitted twice as badly as it was).
+// So the pose is turned by a quarter, a half and three quarters and each turn refined; every
+// refined turn that the silhouettes fit as well as the pose (within `ratio`) and that is still
+// a turn about the upright axis, T(x) = R (x - p) + p, says where the axis is: T's translation
+// is (I - R) p. Where no turn fits (not a product symmetric about its upright axis), `centre`.
+Eigen::Vector3d UprightAxis(const Level& coarse, const Level& middle, const Rigid3d& pose,
+                            const Eigen::Vector3d& centre, double size, double ratio, int threads,
+                            Progress& progress) {
+  const double pose_rms = Evaluate(middle, pose, threads).rms;
+  Eigen::Matrix2d ata = Eigen::Matrix2d::Zero();
+  Eigen::Vector2d atb = Eigen::Vector2d::Zero();
+  for (const double deg : {90.0, 180.0, 270.0}) {
+    Pose refined = Refine(coarse, Evaluate(coarse, TurnedAbout(pose, deg, centre), threads), centre,
+                          5, threads, progress);
+    refined = Refine(middle, Evaluate(middle, refined.table_from_object, threads), centre, 5,
+                     threads, progress);
+    if (refined.rms >= ratio * pose_rms) continue;
+    const Rigid3d turn = pose.Inverse() * refined.table_from_object;
+    const Eigen::AngleAxisd angle_axis(turn.rotation);
+    if (angle_axis.angle() < kUprightAxisMinTurn ||
+        std::abs(angle_axis.axis().z()) < std::cos(kUprightAxisMaxTilt))
+      continue;
+    const Eigen::Matrix2d a = Eigen::Matrix2d::Identity() - turn.rotation.topLeftCorner<2, 2>();
+    ata += a.transpose() * a;
+    atb += a.transpose() * turn.translation.head<2>();
+  }
+  if (ata.determinant() < 1e-3) return centre;
+  const Eigen::Vector2d xy = ata.ldlt().solve(atb);
+  // Far from the hull's centre the refinements found no common axis (not a symmetric product).
+  if ((xy - centre.head<2>()).norm() > kUprightAxisMaxOffset * size) return centre;
+  return {xy.x(), xy.y(), centre.z()};
+}
+
 // The poses, best first, keeping only those at least `min_deg` from every better one.
 std::vector<Pose> Distinct(std::vector<Pose> poses, double min_deg, std::size_t count) {
   std::sort(poses.begin(), poses.end(),
@@ -715,9 +772,11 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
     Rigid3d pose;
     double rms = 0.0;
     double correlation = -1.0;
+    Eigen::Vector3d axis = Eigen::Vector3d::Zero();  // the upright axis it was turned about
   };
   std::vector<Tried> tried;
   std::optional<Rigid3d> turn_set;  // a pose whose turn about the upright axis the colours set
+  Eigen::Vector3d turn_axis = c1;   // and the axis it is turned about
   {
     std::vector<std::size_t> tied = {0};
     for (std::size_t k = 1; k < candidates.size() && !start; ++k)
@@ -744,20 +803,18 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
         result.colour_points = std::max(result.colour_points, found.second);
         return found;
       };
-      auto turned = [&](const Rigid3d& pose, double deg) {
-        const Eigen::Matrix3d r =
-            Eigen::AngleAxisd(deg * std::numbers::pi / 180.0, Eigen::Vector3d::UnitZ())
-                .toRotationMatrix();
-        return pose * Rigid3d(r, c1 - r * c1);
-      };
       const int first_step = start ? -kColourStartDeg / kColourStepDeg : 0;
       const int last_step = start ? kColourStartDeg / kColourStepDeg : 360 / kColourStepDeg - 1;
       for (const std::size_t k : tied) {
+        const Eigen::Vector3d axis =
+            UprightAxis(coarse, middle, candidates[k].table_from_object, c1, size,
+                        options.ambiguity_ratio, threads, progress);
         for (int step = first_step; step <= last_step; ++step) {
-          const Rigid3d pose = turned(candidates[k].table_from_object, step * kColourStepDeg);
+          const Rigid3d pose =
+              TurnedAbout(candidates[k].table_from_object, step * kColourStepDeg, axis);
           const double rms = step == 0 ? candidates[k].rms : Evaluate(fine, pose, threads).rms;
           if (rms >= options.ambiguity_ratio * best_refined_rms) continue;
-          tried.push_back({pose, rms, correlation(pose).first});
+          tried.push_back({pose, rms, correlation(pose).first, axis});
         }
       }
       if (options.colour && !tried.empty()) {
@@ -770,10 +827,12 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
             second = std::max(second, t.correlation);
         // Within a step of the winner: by the degree, then the peak of a parabola through the
         // best degree and its neighbours.
+        turn_axis = tried[win].axis;
         std::vector<double> by_degree(2 * kColourStepDeg + 1);
         for (int deg = -kColourStepDeg; deg <= kColourStepDeg; ++deg)
           by_degree[deg + kColourStepDeg] =
-              deg == 0 ? tried[win].correlation : correlation(turned(tried[win].pose, deg)).first;
+              deg == 0 ? tried[win].correlation
+                       : correlation(TurnedAbout(tried[win].pose, deg, turn_axis)).first;
         const auto peak = static_cast<int>(
             std::max_element(by_degree.begin() + 1, by_degree.end() - 1) - by_degree.begin());
         const double left = by_degree[peak - 1], centre = by_degree[peak],
@@ -781,7 +840,8 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
         const double curvature = left - 2.0 * centre + right;
         const double offset =
             curvature < 0.0 ? std::clamp(0.5 * (left - right) / curvature, -0.5, 0.5) : 0.0;
-        const Rigid3d chosen = turned(tried[win].pose, peak - kColourStepDeg + offset);
+        const Rigid3d chosen =
+            TurnedAbout(tried[win].pose, peak - kColourStepDeg + offset, turn_axis);
         result.colour_correlation = correlation(chosen).first;
         result.runner_up_colour_correlation = second;
         result.colour_decided = !start && result.colour_correlation >= kColourMinWin &&
@@ -795,8 +855,9 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
           const double chosen_rms = Evaluate(fine, chosen, threads).rms;
           bool free_turn = true;
           for (const double deg : {-10.0, 10.0})
-            free_turn = free_turn && Evaluate(fine, turned(chosen, deg), threads).rms <
-                                         options.ambiguity_ratio * chosen_rms;
+            free_turn =
+                free_turn && Evaluate(fine, TurnedAbout(chosen, deg, turn_axis), threads).rms <
+                                 options.ambiguity_ratio * chosen_rms;
           if (free_turn) turn_set = chosen;
           Pose pose = Evaluate(fine, chosen, threads);
           for (const double pixels : {3.0, 1.5}) {
@@ -804,12 +865,19 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
             pose = Refine(narrowed, Evaluate(narrowed, pose.table_from_object, threads), c1, 12,
                           threads, progress);
           }
-          pose = Evaluate(
-              fine,
-              turn_set ? WithTurnOf(pose.table_from_object, *turn_set, c1) : pose.table_from_object,
-              threads);
-          candidates.insert(candidates.begin(), pose);
-          best_refined_rms = pose.rms;
+          pose = Evaluate(fine,
+                          turn_set ? WithTurnOf(pose.table_from_object, *turn_set, turn_axis)
+                                   : pose.table_from_object,
+                          threads);
+          // A pose the colours chose that the silhouettes fit clearly worse than their best is
+          // not taken: the pass stays ambiguous, and the operator is asked.
+          if (result.colour_decided && pose.rms >= options.ambiguity_ratio * best_refined_rms) {
+            result.colour_decided = false;
+            turn_set.reset();
+          } else {
+            candidates.insert(candidates.begin(), pose);
+            best_refined_rms = pose.rms;
+          }
         }
       }
       result.seconds_colour = colour_watch.ElapsedSeconds();
@@ -822,9 +890,10 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
     Pose& best = candidates.front();
     best = CompassSearch(narrowed, Evaluate(narrowed, best.table_from_object, threads), c1,
                          2.0 * fine.pixel_m / radius, 2.0 * fine.pixel_m, 6, threads, progress);
-    best = Evaluate(
-        fine, turn_set ? WithTurnOf(best.table_from_object, *turn_set, c1) : best.table_from_object,
-        threads);
+    best = Evaluate(fine,
+                    turn_set ? WithTurnOf(best.table_from_object, *turn_set, turn_axis)
+                             : best.table_from_object,
+                    threads);
   }
   result.seconds_refine = watch.ElapsedSeconds();
 
@@ -857,7 +926,7 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
     std::stable_sort(tried.begin(), tried.end(), [](const Tried& a, const Tried& b) {
       return a.correlation != b.correlation ? a.correlation > b.correlation : a.rms < b.rms;
     });
-    if (tried.empty()) tried.push_back({best.table_from_object, best.rms, -1.0});
+    if (tried.empty()) tried.push_back({best.table_from_object, best.rms, -1.0, c1});
     for (const Tried& t : tried) {
       if (static_cast<int>(result.alternatives.size()) >= kMaxAlternatives) break;
       const bool near = std::any_of(
