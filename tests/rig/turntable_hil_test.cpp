@@ -219,14 +219,18 @@ TEST_F(TurntableHil, HomingWithoutSensorFails) {
 
 TEST_F(TurntableHil, StopDeceleratesAndEmergencyStopHaltsAtOnce) {
   const double f = sim_->frequency_hz();
-  table_->StartMoveToSteps(60000);
+  // The moves go far (500 s at full speed, 25 s of wall time at the simulator's 20x) so that a
+  // test thread starved by a
+  // loaded machine cannot find them finished before it stops them.
+  constexpr std::int32_t kFar = 2000000;
+  table_->StartMoveToSteps(kFar);
   while (sim_->motor_steps() < 5000) std::this_thread::sleep_for(milliseconds(1));
   table_->Stop(false);
   const std::int64_t at_stop = sim_->motor_steps();
   table_->WaitUntilStopped(kMoveTimeout);
   const cp_status stopped = table_->RawStatus();
   EXPECT_EQ(stopped.position, sim_->motor_steps());
-  EXPECT_LT(stopped.position, 60000);
+  EXPECT_LT(stopped.position, kFar);
   // Stopping distance from full speed: v^2 / 2a = 1000 steps.
   const double distance =
       static_cast<double>(config_.max_speed) * config_.max_speed / (2.0 * config_.acceleration);
@@ -234,7 +238,7 @@ TEST_F(TurntableHil, StopDeceleratesAndEmergencyStopHaltsAtOnce) {
   for (const StepRun& run : Runs(sim_->steps()))
     EXPECT_EQ(ProfileViolation(run, f, config_.max_speed, config_.acceleration), "");
 
-  table_->StartMoveToSteps(60000);
+  table_->StartMoveToSteps(kFar);
   while (sim_->motor_steps() < stopped.position + 5000)
     std::this_thread::sleep_for(milliseconds(1));
   table_->Stop(true);

@@ -65,8 +65,10 @@ TEST(SimTurntableTest, MovesTakeTheTrapezoidalProfileTime) {
 }
 
 TEST(SimTurntableTest, RealTimeMoveIsObservableAndStops) {
-  SimTurntable table({.max_speed_deg_s = 90, .acceleration_deg_s2 = 360, .time_scale = 0.2});
-  table.StartMoveTo(180 * kDeg);  // 2.25 s simulated, 0.45 s of wall time
+  // Slow enough (1.1 s of wall time) that a test thread starved by a loaded machine still finds
+  // the move under way.
+  SimTurntable table({.max_speed_deg_s = 90, .acceleration_deg_s2 = 360, .time_scale = 0.5});
+  table.StartMoveTo(180 * kDeg);  // 2.25 s simulated, 1.1 s of wall time
   std::this_thread::sleep_for(100ms);
   const rig::TurntableStatus moving = table.Status();
   EXPECT_TRUE(moving.moving);
@@ -81,9 +83,9 @@ TEST(SimTurntableTest, RealTimeMoveIsObservableAndStops) {
 }
 
 TEST(SimTurntableTest, StopDeceleratesFromTheCurrentSpeed) {
-  SimTurntable table({.max_speed_deg_s = 90, .acceleration_deg_s2 = 360, .time_scale = 0.2});
+  SimTurntable table({.max_speed_deg_s = 90, .acceleration_deg_s2 = 360, .time_scale = 0.5});
   table.StartMoveTo(360 * kDeg);       // 4.25 s simulated; full speed after 0.25 s
-  std::this_thread::sleep_for(200ms);  // ~1 s simulated: cruising
+  std::this_thread::sleep_for(500ms);  // ~1 s simulated: cruising
   const double before = table.Status().angle_rad;
   table.Stop(/*emergency=*/false);
   table.WaitUntilStopped(2s);
