@@ -220,8 +220,7 @@ TEST_F(TurntableHil, HomingWithoutSensorFails) {
 TEST_F(TurntableHil, StopDeceleratesAndEmergencyStopHaltsAtOnce) {
   const double f = sim_->frequency_hz();
   // The moves go far (500 s at full speed, 25 s of wall time at the simulator's 20x) so that a
-  // test thread starved by a
-  // loaded machine cannot find them finished before it stops them.
+  // test thread starved by a loaded machine cannot find them finished before it stops them.
   constexpr std::int32_t kFar = 2000000;
   table_->StartMoveToSteps(kFar);
   while (sim_->motor_steps() < 5000) std::this_thread::sleep_for(milliseconds(1));
