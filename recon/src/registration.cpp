@@ -1,6 +1,7 @@
 #include "carousel/recon/registration.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -111,9 +112,33 @@ std::vector<Eigen::Vector3d> Subsample(const std::vector<Eigen::Vector3d>& point
   return picked;
 }
 
+// The derivative of the pixel that camera-frame point `cam` projects to, by `cam` (2x3), the
+// lens's distortion included.
+Eigen::Matrix<double, 2, 3> PixelByCam(const CameraModel& camera, const Eigen::Vector3d& cam) {
+  const double inv_z = 1.0 / cam.z();
+  const double x = cam.x() * inv_z, y = cam.y() * inv_z;
+  const Distortion& d = camera.distortion;
+  const double r2 = x * x + y * y;
+  const double radial = 1.0 + r2 * (d.k1 + r2 * (d.k2 + r2 * d.k3));
+  const double radial_by_r2 = d.k1 + r2 * (2.0 * d.k2 + 3.0 * r2 * d.k3);
+  Eigen::Matrix2d by_xy;  // distorted by undistorted normalised coordinates
+  by_xy(0, 0) = radial + 2.0 * x * x * radial_by_r2 + 2.0 * d.p1 * y + 6.0 * d.p2 * x;
+  by_xy(0, 1) = 2.0 * x * y * radial_by_r2 + 2.0 * d.p1 * x + 2.0 * d.p2 * y;
+  by_xy(1, 0) = 2.0 * x * y * radial_by_r2 + 2.0 * d.p1 * x + 2.0 * d.p2 * y;
+  by_xy(1, 1) = radial + 2.0 * y * y * radial_by_r2 + 6.0 * d.p1 * y + 2.0 * d.p2 * x;
+  by_xy.row(0) *= camera.fx;
+  by_xy.row(1) *= camera.fy;
+  Eigen::Matrix<double, 2, 3> xy_by_cam;
+  xy_by_cam << inv_z, 0.0, -x * inv_z, 0.0, inv_z, -y * inv_z;
+  return by_xy * xy_by_cam;
+}
+
 // The truncated distance (metres at the point) of `world` outside view's silhouette: 0 inside
-// and on the boundary, `truncation` where it lies behind the camera or outside the frame.
-double Outside(const LevelView& view, const Eigen::Vector3d& world, double truncation) {
+// and on the boundary, `truncation` where it lies behind the camera or outside the frame. With
+// `gradient`, also its derivative by `world` there (zero where it is 0 or truncated).
+double Outside(const LevelView& view, const Eigen::Vector3d& world, double truncation,
+               Eigen::Vector3d* gradient = nullptr) {
+  if (gradient) gradient->setZero();
   // Written out: under the sanitizers Eigen's product of a 3x3 matrix and a vector stays a
   // chain of calls, and was most of the registration's time there.
   const Eigen::Matrix3d& r = view.camera.cam_from_world.rotation;
@@ -138,7 +163,19 @@ double Outside(const LevelView& view, const Eigen::Vector3d& world, double trunc
   // The transform measures to the nearest object pixel's centre: the boundary is half a
   // pixel nearer.
   const double px = std::max(0.0, d - 0.5);
-  return std::min(truncation, px * cam.z() / view.camera.fx);
+  const double metres_per_px = cam.z() / view.camera.fx;
+  const double outside = px * metres_per_px;
+  if (outside >= truncation) return truncation;
+  if (gradient && px > 0.0) {
+    // The bilinear map's slope, through the projection; and the depth's share (a pixel
+    // spans more metres further away).
+    const Eigen::RowVector2d d_by_pixel((1 - fy) * (r0[x1] - r0[x0]) + fy * (r1[x1] - r1[x0]),
+                                        (1 - fx) * (r1[x0] - r0[x0]) + fx * (r1[x1] - r0[x1]));
+    Eigen::RowVector3d by_cam = metres_per_px * d_by_pixel * PixelByCam(view.camera, cam);
+    by_cam.z() += px / view.camera.fx;
+    *gradient = r.transpose() * by_cam.transpose();
+  }
+  return outside;
 }
 
 std::size_t ResidualCount(const Level& level) {
@@ -146,25 +183,59 @@ std::size_t ResidualCount(const Level& level) {
          level.pass_points.size() * level.reference.size();
 }
 
-// Every residual of `pose` at `level`, into `out` (ResidualCount entries).
+// Every residual of `pose` at `level`, into `out` (ResidualCount entries). With `jacobian`,
+// also each residual's derivative by the pose's change as Moved() takes it about `centre`
+// (table frame): six columns of ResidualCount entries.
 void Residuals(const Level& level, const Rigid3d& table_from_object, int threads,
-               std::vector<double>* out) {
-  out->resize(ResidualCount(level));
+               std::vector<double>* out, std::array<std::vector<double>, 6>* jacobian = nullptr,
+               const Eigen::Vector3d& centre = Eigen::Vector3d::Zero()) {
+  const std::size_t count = ResidualCount(level);
+  out->resize(count);
+  if (jacobian)
+    for (std::vector<double>& column : *jacobian) column.resize(count);
   const Rigid3d object_from_table = table_from_object.Inverse();
+  const Eigen::Matrix3d& rotation = table_from_object.rotation;
   const std::size_t n1 = level.reference_points.size(), n2 = level.pass_points.size();
   const std::size_t m1 = level.reference.size(), m2 = level.pass.size();
   double* r = out->data();
+  // A residual's derivatives by the rotation (about `centre`) and by the translation.
+  auto store = [jacobian](std::size_t at, const Eigen::Vector3d& by_rotation,
+                          const Eigen::Vector3d& by_translation) {
+    for (int k = 0; k < 3; ++k) {
+      (*jacobian)[k][at] = by_rotation[k];
+      (*jacobian)[3 + k][at] = by_translation[k];
+    }
+  };
   ParallelFor(n1 + n2, 256, threads, [&](std::size_t begin, std::size_t end) {
+    Eigen::Vector3d g;
     for (std::size_t i = begin; i < end; ++i) {
       if (i < n1) {
+        // q = T p moves by the turn: dq = omega x (q - centre) + dt.
         const Eigen::Vector3d q = table_from_object * level.reference_points[i];
-        for (std::size_t j = 0; j < m2; ++j)
-          r[i * m2 + j] = Outside(level.pass[j], q, level.truncation_m);
+        for (std::size_t j = 0; j < m2; ++j) {
+          const std::size_t at = i * m2 + j;
+          if (!jacobian) {
+            r[at] = Outside(level.pass[j], q, level.truncation_m);
+            continue;
+          }
+          r[at] = Outside(level.pass[j], q, level.truncation_m, &g);
+          store(at, (q - centre).cross(g), g);
+        }
       } else {
+        // x = T^-1 s moves the other way: dx = R^T ((s - centre) x omega - dt).
         const std::size_t k = i - n1;
-        const Eigen::Vector3d q = object_from_table * level.pass_points[k];
-        for (std::size_t j = 0; j < m1; ++j)
-          r[n1 * m2 + k * m1 + j] = Outside(level.reference[j], q, level.truncation_m);
+        const Eigen::Vector3d& s = level.pass_points[k];
+        const Eigen::Vector3d q = object_from_table * s;
+        for (std::size_t j = 0; j < m1; ++j) {
+          const std::size_t at = n1 * m2 + k * m1 + j;
+          if (!jacobian) {
+            r[at] = Outside(level.reference[j], q, level.truncation_m);
+            continue;
+          }
+          r[at] = Outside(level.reference[j], q, level.truncation_m, &g);
+          const Eigen::Vector3d turned = rotation * g;
+          store(at, turned.cross(s - centre), -turned);
+        }
       }
     }
   });
@@ -231,23 +302,13 @@ Pose Refine(const Level& level, const Pose& start, const Eigen::Vector3d& object
   Pose best = start.cost < std::numeric_limits<double>::infinity()
                   ? start
                   : Evaluate(level, start.table_from_object, threads);
-  const double radius = std::max(1e-3, level.truncation_m * 5.0);
-  const double step_t = 0.25 * level.pixel_m;
-  const double step_r = step_t / radius;
   double lambda = 1e-3;
-  std::vector<double> r0, rk;
-  std::vector<std::vector<double>> columns(6);
+  std::vector<double> r0;
+  std::array<std::vector<double>, 6> columns;
   for (int iteration = 0; iteration < iterations; ++iteration) {
     progress.CheckCancelled();
-    Residuals(level, best.table_from_object, threads, &r0);
     const Eigen::Vector3d centre = best.table_from_object * object_centre;
-    for (int k = 0; k < 6; ++k) {
-      Eigen::Matrix<double, 6, 1> delta = Eigen::Matrix<double, 6, 1>::Zero();
-      delta[k] = k < 3 ? step_r : step_t;
-      Residuals(level, Moved(best.table_from_object, delta, centre), threads, &rk);
-      columns[k].resize(rk.size());
-      for (std::size_t i = 0; i < rk.size(); ++i) columns[k][i] = (rk[i] - r0[i]) / delta[k];
-    }
+    Residuals(level, best.table_from_object, threads, &r0, &columns, centre);
     Eigen::Matrix<double, 6, 6> jtj = Eigen::Matrix<double, 6, 6>::Zero();
     Eigen::Matrix<double, 6, 1> jtr = Eigen::Matrix<double, 6, 1>::Zero();
     for (std::size_t i = 0; i < r0.size(); ++i) {
