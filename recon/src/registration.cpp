@@ -52,8 +52,7 @@ constexpr int kMaxAlternatives = 12;
 // the nearest object pixel (0 on the object).
 struct LevelView {
   CameraModel camera;
-  cv::Mat outside;      // CV_32FC1
-  double factor = 1.0;  // level pixels per full-size pixel
+  cv::Mat outside;  // CV_32FC1
 };
 
 struct Level {
@@ -73,15 +72,15 @@ struct Pose {
 LevelView MakeLevelView(const View& view, int max_side) {
   const cv::Mat mask = view.Mask();
   LevelView level;
-  level.factor = std::min(1.0, static_cast<double>(max_side) / std::max(mask.cols, mask.rows));
+  const double factor =
+      std::min(1.0, static_cast<double>(max_side) / std::max(mask.cols, mask.rows));
   cv::Mat small = mask;
-  if (level.factor < 1.0) {
+  if (factor < 1.0) {
     cv::resize(mask, small,
-               cv::Size(std::max(1, static_cast<int>(std::lround(mask.cols * level.factor))),
-                        std::max(1, static_cast<int>(std::lround(mask.rows * level.factor)))),
+               cv::Size(std::max(1, static_cast<int>(std::lround(mask.cols * factor))),
+                        std::max(1, static_cast<int>(std::lround(mask.rows * factor)))),
                0, 0, cv::INTER_AREA);
-    level.factor = static_cast<double>(small.cols) / mask.cols;
-    level.camera = view.camera().Scaled(level.factor);
+    level.camera = view.camera().Scaled(static_cast<double>(small.cols) / mask.cols);
   } else {
     level.camera = view.camera();
   }
@@ -391,9 +390,10 @@ std::vector<Eigen::Matrix3d> SampleRotations(int count) {
   return rotations;
 }
 
-// The pass's own visual hull (its own table frame), on a coarse grid, from the masks scaled to
-// at most `max_side` pixels (a grid of 96 cells needs no more).
-Mesh PassHull(const std::vector<View>& full_size, int max_side, int threads, Progress& progress) {
+// The views with their masks (and cameras) reduced to at most `max_side` pixels, in memory:
+// what every level and the pass's hull are made from, so that the full-size masks are
+// reduced once.
+std::vector<View> Reduced(const std::vector<View>& full_size, int max_side, int threads) {
   std::vector<View> views(full_size.size());
   ParallelFor(views.size(), 1, threads, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
@@ -412,19 +412,25 @@ Mesh PassHull(const std::vector<View>& full_size, int max_side, int threads, Pro
       views[i].set_name(full_size[i].name());
     }
   });
+  return views;
+}
+
+// The pass's own visual hull (its own table frame), on a coarse grid, from masks of at most
+// the registration's largest side (a grid of 96 cells needs no more).
+Mesh PassHull(const std::vector<View>& reduced, int threads, Progress& progress) {
   VisualHullOptions options;
   options.resolution = 96;
   options.proxy_max_faces = 0;
   options.min_view_consistency = 0.0;
   options.threads = threads;
-  return ComputeVisualHull(views, options, progress).mesh;
+  return ComputeVisualHull(reduced, options, progress).mesh;
 }
 
 // Surface points of the pass's own visual hull (PassHull), with their normals on request.
-std::vector<Eigen::Vector3d> HullPoints(const std::vector<View>& full_size, int max_side,
-                                        int threads, Progress& progress, Eigen::AlignedBox3d* box,
+std::vector<Eigen::Vector3d> HullPoints(const std::vector<View>& reduced, int threads,
+                                        Progress& progress, Eigen::AlignedBox3d* box,
                                         std::vector<Eigen::Vector3d>* normals = nullptr) {
-  Mesh mesh = PassHull(full_size, max_side, threads, progress);
+  Mesh mesh = PassHull(reduced, threads, progress);
   std::vector<Eigen::Vector3d> points;
   points.reserve(mesh.n_vertices());
   for (const auto vertex : mesh.vertices()) {
@@ -761,10 +767,13 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
   Stopwatch watch;
   Eigen::AlignedBox3d reference_box, pass_box;
   std::vector<Eigen::Vector3d> reference_normals;
-  const std::vector<Eigen::Vector3d> reference_points = HullPoints(
-      reference, options.max_side_px, threads, progress, &reference_box, &reference_normals);
+  // The silhouettes, reduced once to the finest level's size.
+  const std::vector<View> reference_masks = Reduced(reference, options.max_side_px, threads);
+  const std::vector<View> pass_masks = Reduced(pass, options.max_side_px, threads);
+  const std::vector<Eigen::Vector3d> reference_points =
+      HullPoints(reference_masks, threads, progress, &reference_box, &reference_normals);
   const std::vector<Eigen::Vector3d> pass_points =
-      HullPoints(pass, options.max_side_px, threads, progress, &pass_box);
+      HullPoints(pass_masks, threads, progress, &pass_box);
   result.size_m = reference_box.sizes().norm();
   result.points_reference = static_cast<int>(reference_points.size());
   result.points_pass = static_cast<int>(pass_points.size());
@@ -775,8 +784,8 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
   // Coarse: every sampled rotation, with the centroids laid on each other (or the operator's
   // pose alone).
   watch.Restart();
-  const Level coarse = MakeLevel(reference, pass, reference_points, pass_points, 8, 192, 300,
-                                 0.08 * size, size, threads);
+  const Level coarse = MakeLevel(reference_masks, pass_masks, reference_points, pass_points, 8, 192,
+                                 300, 0.08 * size, size, threads);
   std::vector<Pose> candidates;
   if (start) {
     candidates.push_back(Evaluate(coarse, *start, threads));
@@ -798,17 +807,18 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
   // Refinement: every candidate at the coarse and the middle level, the best three distinct
   // at the finest.
   watch.Restart();
-  const Level middle = MakeLevel(reference, pass, reference_points, pass_points, 12, 480, 1000,
-                                 0.03 * size, size, threads);
+  const Level middle = MakeLevel(reference_masks, pass_masks, reference_points, pass_points, 12,
+                                 480, 1000, 0.03 * size, size, threads);
   for (Pose& candidate : candidates) {
     candidate = Refine(coarse, candidate, c1, 10, threads, progress);
     candidate = Refine(middle, Evaluate(middle, candidate.table_from_object, threads), c1, 10,
                        threads, progress);
   }
   candidates = Distinct(candidates, options.distinct_deg, 3);
-  const Level fine = MakeLevel(
-      reference, pass, reference_points, pass_points, std::numeric_limits<std::size_t>::max(),
-      options.max_side_px, static_cast<std::size_t>(options.points), 0.012 * size, size, threads);
+  const Level fine =
+      MakeLevel(reference_masks, pass_masks, reference_points, pass_points,
+                std::numeric_limits<std::size_t>::max(), options.max_side_px,
+                static_cast<std::size_t>(options.points), 0.012 * size, size, threads);
   // At the finest level the truncation narrows from 8 to 1.5 pixels: what a hull has too
   // much (the underside its pass did not see) lies further out than that at the right pose,
   // and stops pulling once it is cut off.
@@ -962,7 +972,9 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
   result.table_from_object = best.table_from_object;
   result.residual_m = best.rms;
   // In full-size pixels: the level's pixel at the product, over its scale.
-  const double full_pixel_m = fine.pixel_m * (fine.pass.empty() ? 1.0 : fine.pass.front().factor);
+  const double full_pixel_m =
+      fine.pixel_m *
+      (fine.pass.empty() ? 1.0 : fine.pass.front().camera.fx / pass.front().camera().fx);
   result.residual_px = best.rms / std::max(1e-12, full_pixel_m);
   {
     Level untruncated = fine;
@@ -1011,7 +1023,8 @@ std::vector<cv::Mat> PosePreviews(const std::vector<View>& reference, const std:
                     "pose pictures need at least 2 views in each pass, got "
                         << reference.size() << " and " << pass.size());
   CAROUSEL_THROW_IF(side < 64, InvalidArgument, "pose pictures of " << side << " px: at least 64");
-  const Mesh hull = PassHull(reference, RegistrationOptions().max_side_px, threads, progress);
+  const Mesh hull =
+      PassHull(Reduced(reference, RegistrationOptions().max_side_px, threads), threads, progress);
   std::vector<Eigen::Vector3d> positions;
   positions.reserve(hull.n_vertices());
   for (const auto vertex : hull.vertices()) {
