@@ -45,6 +45,9 @@ constexpr int kColourStartDeg = 30;
 constexpr double kUprightAxisMaxTilt = 3.0 * std::numbers::pi / 180.0;
 constexpr double kUprightAxisMinTurn = 30.0 * std::numbers::pi / 180.0;
 constexpr double kUprightAxisMaxOffset = 0.1;
+// Levenberg-Marquardt stops when a step lowers the cost by less than this fraction (its
+// steps then move the pose by hundredths of a pixel).
+constexpr double kRefineMinGain = 1e-4;
 // An ambiguous result lists at most this many poses for the operator.
 constexpr int kMaxAlternatives = 12;
 
@@ -330,7 +333,7 @@ Pose Refine(const Level& level, const Pose& start, const Eigen::Vector3d& object
         best = trial;
         lambda = std::max(1e-7, lambda / 3.0);
         improved = true;
-        if (gain < 1e-6 * best.cost) return best;
+        if (gain < kRefineMinGain * best.cost) return best;
       } else {
         lambda *= 8.0;
       }
