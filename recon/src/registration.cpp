@@ -48,6 +48,9 @@ constexpr double kUprightAxisMaxOffset = 0.1;
 // Levenberg-Marquardt stops when a step lowers the cost by less than this fraction (its
 // steps then move the pose by hundredths of a pixel).
 constexpr double kRefineMinGain = 1e-4;
+// At the finest level, candidates stop being refined once they fit this many times the
+// ambiguity ratio worse than the best (the operator is never asked about them).
+constexpr double kRefineOnRatio = 1.5;
 // An ambiguous result lists at most this many poses for the operator.
 constexpr int kMaxAlternatives = 12;
 
@@ -824,18 +827,29 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
                 static_cast<std::size_t>(options.points), 0.012 * size, size, threads);
   // At the finest level the truncation narrows from 8 to 1.5 pixels: what a hull has too
   // much (the underside its pass did not see) lies further out than that at the right pose,
-  // and stops pulling once it is cut off.
-  for (Pose& candidate : candidates) {
-    for (const double pixels : {8.0, 3.0, 1.5}) {
-      const Level narrowed = Narrowed(fine, pixels);
-      candidate = Refine(narrowed, Evaluate(narrowed, candidate.table_from_object, threads), c1, 12,
-                         threads, progress);
+  // and stops pulling once it is cut off. A candidate that fits clearly worse than the best
+  // at 8 pixels is not refined further: its ratio to the best then stays within a few per
+  // cent of where the narrower truncations would leave it.
+  std::vector<bool> refining(candidates.size(), true);
+  for (const double pixels : {8.0, 3.0, 1.5}) {
+    const Level narrowed = Narrowed(fine, pixels);
+    double best_rms = std::numeric_limits<double>::infinity();
+    for (std::size_t k = 0; k < candidates.size(); ++k) {
+      if (!refining[k]) continue;
+      candidates[k] = Refine(narrowed, Evaluate(narrowed, candidates[k].table_from_object, threads),
+                             c1, 12, threads, progress);
+      best_rms = std::min(best_rms, candidates[k].rms);
     }
-    candidate = Evaluate(fine, candidate.table_from_object, threads);
+    for (std::size_t k = 0; k < candidates.size(); ++k)
+      refining[k] =
+          refining[k] && candidates[k].rms < kRefineOnRatio * options.ambiguity_ratio * best_rms;
   }
+  for (Pose& candidate : candidates)
+    candidate = Evaluate(fine, candidate.table_from_object, threads);
   std::sort(candidates.begin(), candidates.end(),
             [](const Pose& a, const Pose& b) { return a.cost < b.cost; });
-  // The runner-up is judged against the best as both were refined alike.
+  // The runner-up is judged against the best as both were refined alike (wherever it could
+  // tie).
   double best_refined_rms = candidates.front().rms;
   // Poses the silhouettes fit alike (a symmetric product): the photos' colours decide, when
   // they agree at one pose clearly better than at every other. A product symmetric about its

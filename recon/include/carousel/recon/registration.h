@@ -13,9 +13,10 @@
 // Search: a coarse level (masks of ~200 px, a few hundred points, up to 8 views per pass)
 // scores `rotations` uniformly sampled rotations, each with the translation that lays the two
 // hulls' centroids on each other; the best distinct ones are refined by Levenberg-Marquardt
-// (numeric Jacobian, 6 parameters: a rotation about the product's centre and a translation)
-// at the coarse and a middle level, the best three distinct at the finest (masks of up to
-// `max_side_px`). A runner-up pose at least `distinct_deg` away whose residual is within
+// (analytic Jacobian through the distance maps' bilinear slope and the lens; 6 parameters: a
+// rotation about the product's centre and a translation) at the coarse and a middle level, the
+// best three distinct at the finest (masks of up to `max_side_px`, each full-size mask reduced
+// once for every level). A runner-up pose at least `distinct_deg` away whose residual is within
 // `ambiguity_ratio` of the best makes the registration ambiguous (a nearly symmetric product):
 // it is reported, never silently accepted, unless the photos' colours tell the poses apart
 // (a symmetric bottle's label): the pose where the two passes' photos agree clearly better
