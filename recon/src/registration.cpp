@@ -122,15 +122,8 @@ std::vector<Eigen::Vector3d> Subsample(const std::vector<Eigen::Vector3d>& point
 Eigen::Matrix<double, 2, 3> PixelByCam(const CameraModel& camera, const Eigen::Vector3d& cam) {
   const double inv_z = 1.0 / cam.z();
   const double x = cam.x() * inv_z, y = cam.y() * inv_z;
-  const Distortion& d = camera.distortion;
-  const double r2 = x * x + y * y;
-  const double radial = 1.0 + r2 * (d.k1 + r2 * (d.k2 + r2 * d.k3));
-  const double radial_by_r2 = d.k1 + r2 * (2.0 * d.k2 + 3.0 * r2 * d.k3);
   Eigen::Matrix2d by_xy;  // distorted by undistorted normalised coordinates
-  by_xy(0, 0) = radial + 2.0 * x * x * radial_by_r2 + 2.0 * d.p1 * y + 6.0 * d.p2 * x;
-  by_xy(0, 1) = 2.0 * x * y * radial_by_r2 + 2.0 * d.p1 * x + 2.0 * d.p2 * y;
-  by_xy(1, 0) = 2.0 * x * y * radial_by_r2 + 2.0 * d.p1 * x + 2.0 * d.p2 * y;
-  by_xy(1, 1) = radial + 2.0 * y * y * radial_by_r2 + 6.0 * d.p1 * y + 2.0 * d.p2 * x;
+  camera.distortion.Apply(Eigen::Vector2d(x, y), &by_xy);
   by_xy.row(0) *= camera.fx;
   by_xy.row(1) *= camera.fy;
   Eigen::Matrix<double, 2, 3> xy_by_cam;
