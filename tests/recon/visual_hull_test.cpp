@@ -94,7 +94,13 @@ TEST_P(HullOnScene, ContainsTheObject) {
   EXPECT_LE(d.mean_a_to_b, 0.5 * hull.voxel_size_m);
   EXPECT_NEAR(optimized.volume_m3 / hull.volume_m3, 1.0, 0.01);
 }
+#if defined(CAROUSEL_SANITIZE_BUILD)
+// Under the sanitizers (ten times slower) the code path on the two coarser scenes (the ring's
+// hole among them); the shoe's finer hull is the Release build's.
+INSTANTIATE_TEST_SUITE_P(Scenes, HullOnScene, ::testing::Values("bottle", "ring"));
+#else
 INSTANTIATE_TEST_SUITE_P(Scenes, HullOnScene, ::testing::Values("shoe", "bottle", "ring"));
+#endif
 
 // A large hull also gets a coarser contour of the same field; optimizing that proxy (what the
 // studio does) meets the bounds against the full hull.
