@@ -142,7 +142,7 @@ std::vector<PassAgreement> TrueSilhouetteAgreement(const Mesh& mesh,
 
 // A copy of the session with its first pass only.
 std::filesystem::path FirstPassOnly(const std::filesystem::path& folder) {
-  const std::filesystem::path copy = folder.string() + "_1pass";
+  std::filesystem::path copy = folder.string() + "_1pass";
   std::filesystem::remove_all(copy);
   std::filesystem::copy(folder, copy, std::filesystem::copy_options::recursive);
   studio::Session session = studio::ReadSession(copy);
@@ -153,9 +153,7 @@ std::filesystem::path FirstPassOnly(const std::filesystem::path& folder) {
   return copy;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+int Run(int argc, char** argv) {
   std::string scene = "shoe", pose = "side", size = "1296x864", keep, backdrop = "light",
               mask_shots = "none";
   std::vector<int> seeds = {1};
@@ -198,7 +196,12 @@ int main(int argc, char** argv) {
     capture.mask_shots = mask_shots;
     capture.render.lit = !unlit;
     SetOptionText(studio::SimCaptureOptions::Fields().Find("backdrop"), capture, backdrop);
-    const std::filesystem::path folder = work / (scene + "_" + pose + "_" + std::to_string(seed));
+    std::string case_name = scene;
+    case_name += '_';
+    case_name += pose;
+    case_name += '_';
+    case_name += std::to_string(seed);
+    const std::filesystem::path folder = work / case_name;
     studio::SimulateCapture(capture, folder, progress);
     studio::Session session = studio::ReadSession(folder);
     const Mesh truth = ReadMesh(folder / session.ground_truth.mesh);
@@ -326,4 +329,15 @@ int main(int argc, char** argv) {
                 summary(times).c_str());
   }
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return Run(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "registration_bench: %s\n", e.what());
+    return 1;
+  }
 }

@@ -62,7 +62,7 @@ namespace {
 // (the photos, masks and ground truth are links to the reconstructed session's).
 std::filesystem::path GivenMeshSession(const std::filesystem::path& session, int faces) {
   namespace fs = std::filesystem;
-  const fs::path given = session.string() + "_given" + std::to_string(faces);
+  fs::path given = session.string() + "_given" + std::to_string(faces);
   if (fs::exists(given / "recon" / "mesh.ply")) return given;
   fs::remove_all(given);
   fs::create_directories(given / "recon");

@@ -49,7 +49,7 @@ std::optional<StageStep> StepOf(const std::string& stage) {
     const char* prefix;
     StageStep step;
   };
-  static const Entry kSteps[] = {
+  static constexpr Entry kSteps[] = {
       {"capture", {PipelineStage::kCapture, 0.0, 1.0}},
       {"load scene", {PipelineStage::kCapture, 0.0, 0.05}},
       {"render views", {PipelineStage::kCapture, 0.05, 1.0}},

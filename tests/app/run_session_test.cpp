@@ -16,6 +16,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <fstream>
 #include <functional>
@@ -89,8 +90,8 @@ int Wait(pid_t pid) {
 
 // The publish stage's images at sizes that suit these small photos (its defaults are for
 // DSLR photos: a 720 px spin of 24 renders alone takes 5 s under the sanitizers).
-const std::vector<std::string> kSmallPublish = {"--spin-size",   "240", "--hero-size",   "480",
-                                                "--poster-size", "240", "--cutout-size", "480"};
+constexpr std::array<const char*, 8> kSmallPublish = {
+    "--spin-size", "240", "--hero-size", "480", "--poster-size", "240", "--cutout-size", "480"};
 
 // 8 stops at 480x320 with view 2 held out and scored; or, for the kill test (11 runs, 6 under
 // the sanitizers), 6 stops at 360x240 and nothing held out. Both publish at kSmallPublish.
@@ -246,6 +247,7 @@ TEST(RunSessionTest, ProcessSkipsCurrentStagesAndRunsABatchPastAFailure) {
     std::vector<std::string> all = {"carousel", "--log-level", "off", "process"};
     all.insert(all.end(), args.begin(), args.end());
     std::vector<const char*> argv;
+    argv.reserve(all.size());
     for (const auto& a : all) argv.push_back(a.c_str());
     std::ostringstream out, err;
     const int code = RunCli(static_cast<int>(argv.size()), argv.data(), out, err);
@@ -288,6 +290,7 @@ TEST(RunSessionTest, ProcessSkipsCurrentStagesAndRunsABatchPastAFailure) {
         "carousel", "--log-level", "info", "--log-file",    (dir / "process.log").string(),
         "process",  "--faces",     "2000", session.string()};
     std::vector<const char*> argv;
+    argv.reserve(args.size());
     for (const auto& a : args) argv.push_back(a.c_str());
     std::ostringstream out, err;
     EXPECT_NE(RunCli(static_cast<int>(argv.size()), argv.data(), out, err), 0);
@@ -403,8 +406,9 @@ TEST(RunSessionTest, TwoOrientationsAreRegisteredAndResumedAcrossThePassBoundary
   const Session first = ReadSession(session);
   ASSERT_EQ(first.views.size(), 16u);
   for (const auto& [image, sha] : at_kill) {
-    const auto it = std::find_if(first.views.begin(), first.views.end(),
-                                 [&](const SessionView& v) { return v.image == image; });
+    const auto it =
+        std::find_if(first.views.begin(), first.views.end(),
+                     [&image = image](const SessionView& v) { return v.image == image; });
     ASSERT_NE(it, first.views.end()) << image;
     EXPECT_EQ(it->sha256, sha) << image << " retaken";
   }

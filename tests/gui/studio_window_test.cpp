@@ -32,8 +32,8 @@ namespace {
 // Small photos: 6 stops at 360x240 with view 1 held out; no publish stage (its renders cost
 // most under the sanitizers, and app_test covers it), except in the first test, which
 // publishes at sizes that suit the photos.
-const std::string kCapture = " --size 360x240 --views 6 --exclude-views 1 --no-publish";
-const std::string kCaptureAndPublish =
+constexpr char kCapture[] = " --size 360x240 --views 6 --exclude-views 1 --no-publish";
+constexpr char kCaptureAndPublish[] =
     " --size 360x240 --views 6 --exclude-views 1 --spin-size 240 --hero-size 480"
     " --poster-size 240 --cutout-size 480";
 
@@ -50,6 +50,7 @@ class XvfbDisplay : public ::testing::Environment {
     std::vector<std::string> args = {"Xvfb",        "-displayfd", fd,    "-screen", "0",
                                      "1280x800x24", "-nolisten",  "tcp", "-noreset"};
     std::vector<char*> argv;
+    argv.reserve(args.size() + 1);
     for (std::string& a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
     ASSERT_EQ(::posix_spawnp(&pid_, "Xvfb", nullptr, nullptr, argv.data(), environ), 0)
@@ -72,7 +73,7 @@ class XvfbDisplay : public ::testing::Environment {
  private:
   pid_t pid_ = -1;
 };
-const auto* const kDisplay = ::testing::AddGlobalTestEnvironment(new XvfbDisplay);
+const auto* const xvfb_display = ::testing::AddGlobalTestEnvironment(new XvfbDisplay);
 
 // The window on the virtual display.
 testing::ShellResult RunWindow(const std::string& args) {

@@ -27,8 +27,6 @@
 namespace carousel::recon {
 namespace {
 
-using ::testing::HasSubstr;
-
 class SilhouetteOnScene
     : public ::testing::TestWithParam<std::pair<std::string, SilhouetteMethod>> {};
 
