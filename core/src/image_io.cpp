@@ -59,7 +59,15 @@ bool JpegIsComplete(const std::vector<std::uint8_t>& bytes) {
   return false;
 }
 
-int DecodeFlags(ImageReadMode mode) {
+int DecodeFlags(ImageReadMode mode, int reduction) {
+  if (reduction > 1) {
+    const bool colour = mode == ImageReadMode::kColor;
+    const int reduced =
+        reduction == 2   ? (colour ? cv::IMREAD_REDUCED_COLOR_2 : cv::IMREAD_REDUCED_GRAYSCALE_2)
+        : reduction == 4 ? (colour ? cv::IMREAD_REDUCED_COLOR_4 : cv::IMREAD_REDUCED_GRAYSCALE_4)
+                         : (colour ? cv::IMREAD_REDUCED_COLOR_8 : cv::IMREAD_REDUCED_GRAYSCALE_8);
+    return reduced | cv::IMREAD_IGNORE_ORIENTATION;
+  }
   switch (mode) {
     case ImageReadMode::kColor:
       return cv::IMREAD_COLOR | cv::IMREAD_IGNORE_ORIENTATION;
@@ -113,6 +121,21 @@ const char* ImageEncodingName(ImageEncoding encoding) {
 }
 
 cv::Mat ReadImage(const std::filesystem::path& path, ImageReadMode mode) {
+  return ReadImage(path, mode, 1);
+}
+
+int ImageReduction(int long_side, int min_side) {
+  int reduction = 1;
+  while (reduction < 8 && long_side / (2 * reduction) >= min_side) reduction *= 2;
+  return reduction;
+}
+
+cv::Mat ReadImage(const std::filesystem::path& path, ImageReadMode mode, int reduction) {
+  CAROUSEL_THROW_IF(
+      reduction != 1 && reduction != 2 && reduction != 4 && reduction != 8, InvalidArgument,
+      "ReadImage: reduction must be 1, 2, 4 or 8, got " << reduction << " for " << path.string());
+  CAROUSEL_THROW_IF(reduction > 1 && mode == ImageReadMode::kUnchanged, InvalidArgument,
+                    "ReadImage: " << path.string() << " cannot be read reduced as stored");
   const std::vector<std::uint8_t> bytes = ReadFileBytes(path);
   if (bytes.empty()) throw FormatError(path, "file is empty");
   const ImageEncoding encoding = DetectImageEncoding(bytes.data(), bytes.size());
@@ -128,7 +151,7 @@ cv::Mat ReadImage(const std::filesystem::path& path, ImageReadMode mode) {
   }
   cv::Mat image;
   try {
-    image = cv::imdecode(bytes, DecodeFlags(mode));
+    image = cv::imdecode(bytes, DecodeFlags(mode, reduction));
   } catch (const cv::Exception& e) {
     throw FormatError(path,
                       std::string("corrupt ") + ImageEncodingName(encoding) + " data: " + e.what());

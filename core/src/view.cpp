@@ -1,5 +1,7 @@
 #include "carousel/core/view.h"
 
+#include <algorithm>
+#include <cstdlib>
 #include <mutex>
 
 #include "carousel/core/error.h"
@@ -56,6 +58,27 @@ cv::Mat View::Image() const {
     cache_->image = image;
   }
   return cache_->image;
+}
+
+cv::Mat View::ImageAtLeast(int min_side) const {
+  const int reduction = ImageReduction(std::max(camera_.width, camera_.height), min_side);
+  if (reduction == 1) return Image();
+  {
+    std::lock_guard<std::mutex> lock(cache_->mutex);
+    if (!cache_->image.empty()) return cache_->image;
+  }
+  CAROUSEL_THROW_IF(image_path_.empty(), InvalidArgument,
+                    "view '" << name_ << "' has no photo: neither a file nor pixels");
+  cv::Mat image = ReadImage(image_path_, ImageReadMode::kColor, reduction);
+  // Rounded up (JPEG) or down (the others) from the camera's size over the reduction.
+  if (std::abs(image.cols * reduction - camera_.width) >= reduction ||
+      std::abs(image.rows * reduction - camera_.height) >= reduction) {
+    throw FormatError(image_path_, "photo is about " + std::to_string(image.cols * reduction) +
+                                       "x" + std::to_string(image.rows * reduction) +
+                                       " but its camera is " + std::to_string(camera_.width) + "x" +
+                                       std::to_string(camera_.height));
+  }
+  return image;
 }
 
 cv::Mat View::Mask() const {

@@ -581,11 +581,13 @@ std::vector<ColourView> ColourViews(const std::vector<View>& views, int threads,
   std::vector<ColourView> out(views.size());
   ParallelFor(views.size(), 1, threads, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
-      const cv::Mat& image = views[i].Image();
+      // Decoded reduced where the photo is not in memory: most of the time this takes.
+      const cv::Mat image = views[i].ImageAtLeast(side);
+      const CameraModel& camera = views[i].camera();
       const double factor =
-          std::min(1.0, static_cast<double>(side) / std::max(image.cols, image.rows));
+          std::min(1.0, static_cast<double>(side) / std::max(camera.width, camera.height));
       ColourView& view = out[i];
-      view.camera = views[i].camera().Scaled(factor);
+      view.camera = camera.Scaled(factor);
       const cv::Size size(view.camera.width, view.camera.height);
       cv::resize(image, view.image, size, 0, 0, cv::INTER_AREA);
       cv::Mat mask;

@@ -46,6 +46,46 @@ TEST(ImageIoTest, ReadsARealCameraJpeg) {
   EXPECT_EQ(gray.type(), CV_8UC1);
 }
 
+TEST(ImageIoTest, ReductionKeepsThePictureAtLeastTheAskedSize) {
+  EXPECT_EQ(ImageReduction(5184, 480), 8);
+  EXPECT_EQ(ImageReduction(5184, 648), 8);
+  EXPECT_EQ(ImageReduction(5184, 649), 4);
+  EXPECT_EQ(ImageReduction(5184, 1920), 2);
+  EXPECT_EQ(ImageReduction(5184, 2593), 1);
+  EXPECT_EQ(ImageReduction(640, 1000), 1);
+  EXPECT_EQ(ImageReduction(100000, 10), 8) << "no reduction past 1/8";
+}
+
+// A JPEG reduced by its decoder and a PNG reduced after decoding show the same picture as the
+// whole one shrunk, at the size the reduction gives (a JPEG's rounded up, a PNG's down).
+TEST(ImageIoTest, ReadsAPictureReduced) {
+  TempDir dir;
+  cv::Mat image = Gradient(203, 101);
+  cv::GaussianBlur(image, image, cv::Size(9, 9), 3.0);
+  WriteImage(dir / "a.jpg", image, {.jpeg_quality = 98});
+  WriteImage(dir / "a.png", image);
+  for (const int reduction : {2, 4, 8}) {
+    SCOPED_TRACE(reduction);
+    cv::Mat expected;
+    const cv::Mat jpeg = ReadImage(dir / "a.jpg", ImageReadMode::kColor, reduction);
+    ASSERT_EQ(jpeg.size(),
+              cv::Size((203 + reduction - 1) / reduction, (101 + reduction - 1) / reduction));
+    cv::resize(image, expected, jpeg.size(), 0, 0, cv::INTER_AREA);
+    EXPECT_GT(cv::PSNR(jpeg, expected), 25.0);  // the wrapped blue ramp blurs at its edge
+    const cv::Mat png = ReadImage(dir / "a.png", ImageReadMode::kGray, reduction);
+    ASSERT_EQ(png.size(), cv::Size(203 / reduction, 101 / reduction));
+    EXPECT_EQ(png.type(), CV_8UC1);
+  }
+  EXPECT_EQ(ReadImage(dir / "a.jpg", ImageReadMode::kColor, 1).size(), image.size());
+  CAROUSEL_EXPECT_THROW_WITH(ReadImage(dir / "a.jpg", ImageReadMode::kColor, 3), InvalidArgument,
+                             "a.jpg");
+  CAROUSEL_EXPECT_THROW_WITH(ReadImage(dir / "a.png", ImageReadMode::kUnchanged, 2),
+                             InvalidArgument, "a.png");
+  WriteBytes(dir / "cut.jpg", ReadBytes(dir / "a.jpg").substr(0, 300));
+  CAROUSEL_EXPECT_THROW_WITH(ReadImage(dir / "cut.jpg", ImageReadMode::kColor, 4), FormatError,
+                             "cut.jpg");
+}
+
 TEST(ImageIoTest, MissingFileIsAnIoErrorNamingIt) {
   TempDir dir;
   try {

@@ -52,6 +52,28 @@ TEST(ViewTest, WrongSizeIsAFormatErrorNamingTheFile) {
   CAROUSEL_EXPECT_THROW_WITH(view.Mask(), FormatError, "mask.png: mask is 20x20");
 }
 
+// The photo for a small picture: decoded reduced and not kept, unless it is in memory.
+TEST(ViewTest, ReducedPhotoIsDecodedSmallUnlessLoaded) {
+  TempDir dir;
+  const CameraModel camera{
+      .width = 400, .height = 300, .fx = 500, .fy = 500, .cx = 199.5, .cy = 149.5};
+  WriteImage(dir / "photo.jpg", cv::Mat(300, 400, CV_8UC3, cv::Scalar(40, 90, 160)));
+  const View view(camera, dir / "photo.jpg");
+  const cv::Mat small = view.ImageAtLeast(100);
+  EXPECT_EQ(small.size(), cv::Size(100, 75));
+  EXPECT_LT(cv::norm(small.at<cv::Vec3b>(30, 50), cv::Vec3b(40, 90, 160), cv::NORM_INF), 4.0);
+  EXPECT_EQ(view.ImageAtLeast(101).size(), cv::Size(200, 150));
+  EXPECT_EQ(view.ImageAtLeast(300).size(), cv::Size(400, 300));
+  const cv::Mat whole = view.Image();
+  EXPECT_EQ(view.ImageAtLeast(100).data, whole.data) << "a loaded photo is not decoded again";
+
+  WriteImage(dir / "small.jpg", cv::Mat(150, 200, CV_8UC3, cv::Scalar(0)));
+  const View wrong(camera, dir / "small.jpg");
+  CAROUSEL_EXPECT_THROW_WITH(wrong.ImageAtLeast(50), FormatError,
+                             "small.jpg: photo is about 200x152 but its camera is 400x300");
+  EXPECT_THROW(View(camera, {}).ImageAtLeast(50), InvalidArgument);
+}
+
 TEST(ViewTest, MissingFilesAndMasksAreReported) {
   TempDir dir;
   const View view(SmallCamera(), dir / "gone.jpg");

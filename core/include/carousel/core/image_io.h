@@ -28,6 +28,17 @@ const char* ImageEncodingName(ImageEncoding encoding);
 //        undecodable), naming the file.
 cv::Mat ReadImage(const std::filesystem::path& path, ImageReadMode mode = ImageReadMode::kColor);
 
+// The largest of 1, 2, 4 and 8 that leaves a picture `long_side` pixels long at least
+// `min_side` long (1 when it is shorter already).
+int ImageReduction(int long_side, int min_side);
+
+// ReadImage at 1/`reduction` of the picture's size in each direction (`reduction` 1, 2, 4 or
+// 8; kColor or kGray): a JPEG by its decoder's scaled decoding (at 1/8, several times faster
+// than decoding it whole), other encodings decoded whole, then reduced. A JPEG's reduced size
+// is rounded up, the others' down. \throw as ReadImage; InvalidArgument for another reduction
+// or kUnchanged.
+cv::Mat ReadImage(const std::filesystem::path& path, ImageReadMode mode, int reduction);
+
 // A silhouette mask: 8-bit single channel, 255 = object, 0 = background. Colour files are
 // converted to grey. \throw as ReadImage.
 cv::Mat ReadMask(const std::filesystem::path& path);

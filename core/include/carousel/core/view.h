@@ -39,6 +39,11 @@ class View {
   // \throw IoError/FormatError naming the file (missing, corrupt, or not camera().width x
   //        camera().height); InvalidArgument if the view has neither a path nor pixels.
   cv::Mat Image() const;
+  // The photo for a picture whose longer side is `min_side`: the loaded photo if it is in
+  // memory, else the file decoded at 1/2, 1/4 or 1/8 of its size (ImageReduction: a JPEG
+  // decodes much faster so), neither cached nor full-size. Callers resize it to the size they
+  // need. \throw as Image().
+  cv::Mat ImageAtLeast(int min_side) const;
   // The silhouette, 8-bit, 255 = object, same size as the photo, loaded on first call.
   // \throw as Image(); InvalidArgument if the view has no mask.
   cv::Mat Mask() const;
