@@ -576,8 +576,10 @@ struct ColourView {
   cv::Mat inner;  // CV_8UC1, the mask eroded
 };
 
-std::vector<ColourView> ColourViews(const std::vector<View>& views, int threads,
-                                    int side = kColourSide) {
+// The pass's photos at most `side` long, their silhouettes from `masks` (the same views, their
+// masks at any size: Reduced's shrink faster than the full-size ones).
+std::vector<ColourView> ColourViews(const std::vector<View>& views, const std::vector<View>& masks,
+                                    int threads, int side = kColourSide) {
   std::vector<ColourView> out(views.size());
   ParallelFor(views.size(), 1, threads, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
@@ -591,7 +593,7 @@ std::vector<ColourView> ColourViews(const std::vector<View>& views, int threads,
       const cv::Size size(view.camera.width, view.camera.height);
       cv::resize(image, view.image, size, 0, 0, cv::INTER_AREA);
       cv::Mat mask;
-      cv::resize(views[i].Mask(), mask, size, 0, 0, cv::INTER_AREA);
+      cv::resize(masks[i].Mask(), mask, size, 0, 0, cv::INTER_AREA);
       cv::erode(mask >= 128, view.inner, cv::Mat(), cv::Point(-1, -1), 2);
       views[i].ReleasePixels();
     }
@@ -623,28 +625,42 @@ std::optional<cv::Vec3f> ColourAt(const std::vector<ColourView>& views,
   return colour;
 }
 
+// ColourAt at each of `points` (normals `normals`, the reference pass's frame) moved into the
+// pass's frame by `table_from_object`.
+std::vector<std::optional<cv::Vec3f>> ColoursAt(const std::vector<ColourView>& views,
+                                                const std::vector<Eigen::Vector3d>& points,
+                                                const std::vector<Eigen::Vector3d>& normals,
+                                                const Rigid3d& table_from_object, int threads) {
+  std::vector<std::optional<cv::Vec3f>> colours(points.size());
+  ParallelFor(points.size(), 256, threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i)
+      colours[i] = ColourAt(views, table_from_object * points[i],
+                            table_from_object.rotation * normals[i]);
+  });
+  return colours;
+}
+
 // How well the passes' photos agree in colour at the reference hull's points with the pass
-// laid as `table_from_object` says: the Pearson correlation per channel over the points both
+// laid as `table_from_object` says, from the points' colours in the reference's photos
+// (`reference`: ColoursAt, unmoved): the Pearson correlation per channel over the points both
 // passes see frontally, averaged over the channels (a gain and an offset per pass, the light
 // changed with the pose, do not count), and the points it took. -1 when fewer than
 // kColourMinPoints.
-std::pair<double, int> ColourCorrelation(const std::vector<ColourView>& reference,
+std::pair<double, int> ColourCorrelation(const std::vector<std::optional<cv::Vec3f>>& reference,
                                          const std::vector<ColourView>& pass,
                                          const std::vector<Eigen::Vector3d>& points,
                                          const std::vector<Eigen::Vector3d>& normals,
-                                         const Rigid3d& table_from_object) {
+                                         const Rigid3d& table_from_object, int threads) {
+  const std::vector<std::optional<cv::Vec3f>> moved =
+      ColoursAt(pass, points, normals, table_from_object, threads);
   std::vector<cv::Vec3f> a, b;
   std::vector<double> height;
   for (std::size_t i = 0; i < points.size(); ++i) {
-    const auto first = ColourAt(reference, points[i], normals[i]);
-    if (!first) continue;
-    const auto second =
-        ColourAt(pass, table_from_object * points[i], table_from_object.rotation * normals[i]);
-    if (!second) continue;
+    if (!reference[i] || !moved[i]) continue;
     // Chromaticity: the light's direction scales a point's channels alike.
     auto chroma = [](const cv::Vec3f& c) { return c / (c[0] + c[1] + c[2] + 30.0f); };
-    a.push_back(chroma(*first));
-    b.push_back(chroma(*second));
+    a.push_back(chroma(*reference[i]));
+    b.push_back(chroma(*moved[i]));
     height.push_back(points[i].z());
   }
   const int n = static_cast<int>(a.size());
@@ -869,20 +885,22 @@ RegistrationResult RegisterPass(const std::vector<View>& reference, const std::v
         tied.push_back(k);
     if (tied.size() > 1 || (start && options.colour)) {
       Stopwatch colour_watch;
-      std::vector<ColourView> reference_colours, pass_colours;
+      std::vector<ColourView> pass_colours;
+      std::vector<std::optional<cv::Vec3f>> reference_colours;
       std::vector<Eigen::Vector3d> points, normals;
       if (options.colour) {
-        reference_colours = ColourViews(reference, threads);
-        pass_colours = ColourViews(pass, threads);
+        pass_colours = ColourViews(pass, pass_masks, threads);
         for (const std::size_t i : Spread(reference_points.size(), 3000)) {
           points.push_back(reference_points[i]);
           normals.push_back(reference_normals[i]);
         }
+        reference_colours = ColoursAt(ColourViews(reference, reference_masks, threads), points,
+                                      normals, Rigid3d(), threads);
       }
       auto correlation = [&](const Rigid3d& pose) {
         if (!options.colour) return std::pair<double, int>(-1.0, 0);
         const auto found =
-            ColourCorrelation(reference_colours, pass_colours, points, normals, pose);
+            ColourCorrelation(reference_colours, pass_colours, points, normals, pose, threads);
         result.colour_points = std::max(result.colour_points, found.second);
         return found;
       };
@@ -1057,9 +1075,9 @@ std::vector<cv::Mat> PosePreviews(const std::vector<View>& reference, const std:
   // Two photos of the reference from opposite sides, at four times the pictures' detail: each
   // picture shows the product's box, enlarged.
   const int detail = 4 * side;
-  const std::vector<ColourView> shown =
-      ColourViews({reference.front(), reference[reference.size() / 2]}, threads, detail);
-  const std::vector<ColourView> pass_colours = ColourViews(pass, threads, detail);
+  const std::vector<View> shown_views = {reference.front(), reference[reference.size() / 2]};
+  const std::vector<ColourView> shown = ColourViews(shown_views, shown_views, threads, detail);
+  const std::vector<ColourView> pass_colours = ColourViews(pass, pass, threads, detail);
   // Per shown photo, the product's box in it, and the hull's surface point and normal under
   // each pixel of the box (none: NaN).
   struct Surface {
