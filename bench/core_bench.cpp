@@ -26,7 +26,7 @@ CameraModel DslrCamera() {
   return camera;
 }
 
-void BM_Project(benchmark::State& state) {
+void BenchProject(benchmark::State& state) {
   const CameraModel camera = DslrCamera();
   std::mt19937 rng(1);
   std::uniform_real_distribution<double> u(-0.1, 0.1);
@@ -37,9 +37,9 @@ void BM_Project(benchmark::State& state) {
   }
   state.SetItemsProcessed(state.iterations() * points.size());
 }
-BENCHMARK(BM_Project);
+BENCHMARK(BenchProject);
 
-void BM_Unproject(benchmark::State& state) {
+void BenchUnproject(benchmark::State& state) {
   const CameraModel camera = DslrCamera();
   std::mt19937 rng(2);
   std::uniform_real_distribution<double> x(0, 5183), y(0, 3455);
@@ -50,9 +50,9 @@ void BM_Unproject(benchmark::State& state) {
   }
   state.SetItemsProcessed(state.iterations() * pixels.size());
 }
-BENCHMARK(BM_Unproject);
+BENCHMARK(BenchUnproject);
 
-void BM_ReadFullSizeJpeg(benchmark::State& state) {
+void BenchReadFullSizeJpeg(benchmark::State& state) {
   // A photo-like image: smooth gradients plus grain, encoded like a camera JPEG.
   cv::Mat photo(3456, 5184, CV_8UC3);
   cv::randn(photo, cv::Scalar::all(128), cv::Scalar::all(20));
@@ -64,7 +64,7 @@ void BM_ReadFullSizeJpeg(benchmark::State& state) {
   state.counters["MB"] = static_cast<double>(std::filesystem::file_size(path)) / 1e6;
   std::filesystem::remove(path);
 }
-BENCHMARK(BM_ReadFullSizeJpeg)->Unit(benchmark::kMillisecond);
+BENCHMARK(BenchReadFullSizeJpeg)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 }  // namespace carousel

@@ -35,7 +35,7 @@ const ShoeStudio& Studio() {
   return studio;
 }
 
-void BM_RenderShoeFullSize(benchmark::State& state) {
+void BenchRenderShoeFullSize(benchmark::State& state) {
   const ShoeStudio& studio = Studio();
   RenderOptions options;
   options.noise_sigma = static_cast<double>(state.range(0));
@@ -53,7 +53,7 @@ void BM_RenderShoeFullSize(benchmark::State& state) {
     WriteImage(std::filesystem::path(save) / "shoe_mask.png", result.mask);
   }
 }
-BENCHMARK(BM_RenderShoeFullSize)->Arg(0)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BenchRenderShoeFullSize)->Arg(0)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 }  // namespace
 }  // namespace carousel::sim

@@ -129,7 +129,7 @@ std::string HostName() {
 // This program, by the path every node of a cluster sees it at.
 std::filesystem::path SelfExecutable() {
   std::error_code ec;
-  const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", ec);
+  std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", ec);
   if (ec) throw IoError("/proc/self/exe", "cannot find this program: " + ec.message());
   return self;
 }
@@ -220,6 +220,7 @@ int RunTask(const TaskArgs& args, Io& io) {
   const std::vector<std::string> flags = args.process.Args();
   words.insert(words.end(), flags.begin(), flags.end());
   std::vector<const char*> argv;
+  argv.reserve(words.size());
   for (const std::string& w : words) argv.push_back(w.c_str());
   std::ostringstream out_text, err_text;
   TeeBuffer out_tee(log_stream.rdbuf(), out_text.rdbuf());
@@ -301,6 +302,7 @@ pid_t SpawnTask(const BatchArgs& args, const std::filesystem::path& folder, int 
   const std::vector<std::string> flags = args.process.Args();
   words.insert(words.end(), flags.begin(), flags.end());
   std::vector<char*> argv;
+  argv.reserve(words.size() + 1);
   for (std::string& w : words) argv.push_back(w.data());
   argv.push_back(nullptr);
   const std::string output =
@@ -629,8 +631,12 @@ std::vector<BatchRecord> Status(const std::filesystem::path& folder, bool* activ
     if (record.stages.empty()) {
       try {
         const studio::Session session = studio::ReadSession(record.session);
-        for (const auto& [stage, state] : session.stages)
-          record.stages += (record.stages.empty() ? "" : ", ") + stage + ' ' + state;
+        for (const auto& [stage, state] : session.stages) {
+          if (!record.stages.empty()) record.stages += ", ";
+          record.stages += stage;
+          record.stages += ' ';
+          record.stages += state;
+        }
       } catch (const Error&) {
         // No manifest: the record (or its absence) says enough.
       }

@@ -214,7 +214,7 @@ IntrinsicsResult CalibrateIntrinsics(const std::vector<NamedImage>& images, cons
     for (const cv::Point2f& p : v.view.image) {
       const int cx = std::clamp(static_cast<int>(3.0 * p.x / size.width), 0, 2);
       const int cy = std::clamp(static_cast<int>(3.0 * p.y / size.height), 0, 2);
-      seen[static_cast<std::size_t>(cy * 3 + cx)] = true;
+      seen[3 * static_cast<std::size_t>(cy) + static_cast<std::size_t>(cx)] = true;
     }
   }
   result.cell_coverage = static_cast<double>(std::count(seen.begin(), seen.end(), true)) /

@@ -344,7 +344,7 @@ RigCalibrationResult CalibrateRig(const std::vector<RigPhoto>& inputs, const Boa
       for (const cv::Point2f& q : p->view.image) {
         const int x = std::clamp(static_cast<int>(3.0 * q.x / size.width), 0, 2);
         const int y = std::clamp(static_cast<int>(3.0 * q.y / size.height), 0, 2);
-        seen[static_cast<std::size_t>(3 * y + x)] = true;
+        seen[3 * static_cast<std::size_t>(y) + static_cast<std::size_t>(x)] = true;
       }
     }
     const int cells = static_cast<int>(std::count(seen.begin(), seen.end(), true));
@@ -393,6 +393,7 @@ RigCalibrationResult CalibrateRig(const std::vector<RigPhoto>& inputs, const Boa
       }
     } else {
       std::vector<BoardView> views;
+      views.reserve(of.size());
       for (const Photo* p : of) views.push_back(p->view);
       const internal::ViewsCalibration calibrated =
           internal::CalibrateViews(views, camera_size[static_cast<std::size_t>(c)], flags);
@@ -588,6 +589,7 @@ RigCalibrationResult CalibrateRig(const std::vector<RigPhoto>& inputs, const Boa
   }
   // The common offset is the median: a few stops that lost steps stand out against it.
   std::vector<double> stop_offsets;
+  stop_offsets.reserve(reported_of.size());
   for (const auto& [stop, reported] : reported_of) stop_offsets.push_back(offsets[stop]);
   const double mean_offset = Median(stop_offsets);
   // observed = scale * reported + offset, least squares.

@@ -23,7 +23,7 @@ bool StartsWith(const unsigned char* data, std::size_t size, std::initializer_li
 }
 
 std::string HexPrefix(const std::vector<std::uint8_t>& bytes) {
-  static const char* kDigits = "0123456789abcdef";
+  static constexpr const char* kDigits = "0123456789abcdef";
   std::string out;
   for (std::size_t i = 0; i < std::min<std::size_t>(bytes.size(), 8); ++i) {
     if (i) out += ' ';

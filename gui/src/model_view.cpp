@@ -64,7 +64,7 @@ Eigen::Vector3f HeatColour(double t) {
 
 double Percentile(std::vector<double> values, double p) {
   if (values.empty()) return 0.0;
-  const auto k = static_cast<std::size_t>(p * static_cast<double>(values.size() - 1) + 0.5);
+  const auto k = static_cast<std::size_t>(std::lround(p * static_cast<double>(values.size() - 1)));
   std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(k), values.end());
   return values[k];
 }

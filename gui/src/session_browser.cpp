@@ -67,7 +67,7 @@ std::vector<SessionSummary> ListSessions(const std::filesystem::path& out) {
   std::vector<std::pair<std::filesystem::file_time_type, SessionSummary>> found;
   std::error_code ec;
   for (const auto& entry : std::filesystem::directory_iterator(out, ec)) {
-    const std::filesystem::path folder = entry.path();
+    const std::filesystem::path& folder = entry.path();
     const std::string name = folder.filename().string();
     if (name.empty() || name[0] == '.' || !entry.is_directory(ec)) continue;
     if (!IsFile(folder / studio::kManifestName) && !IsFile(folder / "run.json")) continue;

@@ -634,8 +634,8 @@ std::vector<std::optional<cv::Vec3f>> ColoursAt(const std::vector<ColourView>& v
   std::vector<std::optional<cv::Vec3f>> colours(points.size());
   ParallelFor(points.size(), 256, threads, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i)
-      colours[i] = ColourAt(views, table_from_object * points[i],
-                            table_from_object.rotation * normals[i]);
+      colours[i] =
+          ColourAt(views, table_from_object * points[i], table_from_object.rotation * normals[i]);
   });
   return colours;
 }

@@ -554,7 +554,7 @@ cv::Mat MixtureSamples(const cv::Mat& image, const cv::Mat& labels, bool object)
   }
   const int stride = std::max(1, (count + kMixtureSamples - 1) / kMixtureSamples);
   cv::Mat samples(0, 1, CV_32FC3);
-  samples.reserve(static_cast<std::size_t>(count / stride + 1));
+  samples.reserve(static_cast<std::size_t>(count / stride) + 1);
   int seen = 0;
   for (int y = 0; y < labels.rows; ++y) {
     const auto* l = labels.ptr<std::uint8_t>(y);
@@ -1826,6 +1826,7 @@ void CheckNotCutByThePlate(const std::vector<View>& views,
                            const std::vector<SilhouetteStats>& stats) {
   if (stats.size() < 3) return;
   std::vector<double> fractions;
+  fractions.reserve(stats.size());
   for (const SilhouetteStats& s : stats) fractions.push_back(s.rim_outline_fraction);
   std::vector<double> sorted = fractions;
   std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2),
@@ -1961,6 +1962,7 @@ std::vector<std::vector<std::size_t>> ViewsByCamera(const std::vector<View>& vie
     it->views.push_back(i);
   }
   std::vector<std::vector<std::size_t>> out;
+  out.reserve(groups.size());
   for (Group& g : groups) out.push_back(std::move(g.views));
   return out;
 }

@@ -278,7 +278,7 @@ std::string BatchTable(const std::vector<BatchRecord>& records) {
     std::string note = r.error;
     if (note.size() > 100) note = note.substr(0, 97) + "...";
     if (r.attempt > 0)
-      note = "attempt " + std::to_string(r.attempt + 1) + (note.empty() ? "" : "; ") + note;
+      note.insert(0, "attempt " + std::to_string(r.attempt + 1) + (note.empty() ? "" : "; "));
     row(r.sku, r.status, r.faces > 0 ? std::to_string(r.faces) : "-",
         r.texture_size > 0 ? std::to_string(r.texture_size) : "-",
         r.held_out_psnr_db ? Fixed(*r.held_out_psnr_db, 2) : "-", ran ? Fixed(r.seconds, 1) : "-",

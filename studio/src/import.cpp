@@ -296,7 +296,7 @@ std::optional<UprightFrameResult> UprightFrame(const std::vector<CameraModel>& c
   Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
   for (const Eigen::Vector3d& c : centres) scatter += (c - mean) * (c - mean).transpose() / n;
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> spread(scatter);
-  const Eigen::Vector3d lambda = spread.eigenvalues();                        // ascending
+  const Eigen::Vector3d& lambda = spread.eigenvalues();                       // ascending
   if (lambda(2) <= 0.0 || lambda(1) < 1e-6 * lambda(2)) return std::nullopt;  // one point, a line
   Eigen::Vector3d up;
   Eigen::Vector3d mean_up = Eigen::Vector3d::Zero();
@@ -348,10 +348,10 @@ std::optional<UprightFrameResult> UprightFrame(const std::vector<CameraModel>& c
     look += axes[i].dot(up) / n;
     photo_up += ups[i].dot(up) / n;
   }
-  const double kLevel = std::sin(2.0 * std::numbers::pi / 180.0);
-  if (look > kLevel || (std::abs(look) <= kLevel && photo_up < 0.0)) up = -up;
-  result.basis += std::abs(look) > kLevel ? ", the cameras looking down on the object"
-                                          : ", pointing where the photos' up does";
+  const double level = std::sin(2.0 * std::numbers::pi / 180.0);
+  if (look > level || (std::abs(look) <= level && photo_up < 0.0)) up = -up;
+  result.basis += std::abs(look) > level ? ", the cameras looking down on the object"
+                                         : ", pointing where the photos' up does";
   const Eigen::Matrix3d rotation =
       Eigen::Quaterniond::FromTwoVectors(up, Eigen::Vector3d::UnitZ()).toRotationMatrix();
   result.world_from_dataset = Rigid3d(rotation, -(rotation * origin));
@@ -384,6 +384,7 @@ ImportResult ImportDataset(const ImportOptions& options,
   std::optional<Rigid3d> world_from_dataset;
   if (!options.keep_frame) {
     std::vector<CameraModel> cameras;
+    cameras.reserve(views.size());
     for (const DatasetView& view : views) cameras.push_back(view.camera);
     if (const auto upright = UprightFrame(cameras)) {
       world_from_dataset = upright->world_from_dataset;

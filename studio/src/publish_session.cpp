@@ -438,6 +438,7 @@ PublishSessionResult PublishSession(const std::filesystem::path& session_folder,
     const std::vector<std::string> names =
         publish::SpinSetNames(session.product, options.spin_frames, extension);
     std::vector<publish::ZipEntry> entries;
+    entries.reserve(static_cast<std::size_t>(options.spin_frames));
     for (int k = 0; k < options.spin_frames; ++k)
       entries.push_back({names[k], publish::EncodeCatalogImage(frames[k], options.jpeg_quality,
                                                                model_folder / "360.zip")});

@@ -32,6 +32,7 @@ struct Result {
 Result Carousel(std::vector<std::string> args) {
   args.insert(args.begin(), {"carousel", "--log-level", "warn"});
   std::vector<const char*> argv;
+  argv.reserve(args.size());
   for (const std::string& a : args) argv.push_back(a.c_str());
   std::ostringstream out, err;
   const int code = RunCli(static_cast<int>(argv.size()), argv.data(), out, err);

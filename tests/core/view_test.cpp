@@ -24,7 +24,7 @@ TEST(ViewTest, LoadsPixelsLazilyAndSharesThemBetweenCopies) {
   const View view(SmallCamera(), dir / "photo.png", dir / "mask.png", 0.5);
   EXPECT_EQ(view.name(), "photo.png");
   EXPECT_DOUBLE_EQ(view.table_angle_rad(), 0.5);
-  const View copy = view;
+  const View copy = view;  // NOLINT(performance-unnecessary-copy-initialization): a copy's cache
   const cv::Mat image = view.Image();
   EXPECT_EQ(image.at<cv::Vec3b>(0, 0), cv::Vec3b(1, 2, 3));
   EXPECT_EQ(copy.Image().data, image.data) << "copies share the decoded pixels";
@@ -37,6 +37,7 @@ TEST(ViewTest, ConcurrentFirstLoadsDecodeOnce) {
   const View view(SmallCamera(), dir / "photo.png");
   std::vector<const uchar*> data(8);
   std::vector<std::thread> threads;
+  threads.reserve(8);
   for (int i = 0; i < 8; ++i) threads.emplace_back([&, i] { data[i] = view.Image().data; });
   for (auto& t : threads) t.join();
   for (const uchar* d : data) EXPECT_EQ(d, data[0]);

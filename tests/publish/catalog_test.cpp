@@ -92,7 +92,7 @@ TEST(CutOutTest, TransparentKeepsTheMaskAsAlphaAndSoftEdgesBlend) {
   EXPECT_NEAR(alpha_box.y + 0.5 * alpha_box.height, 0.5 * cut.rows, 1.0);
   // On white, the soft pixel is half photo, half white.
   const cv::Mat white = CutOut(photo, mask, {.margin = 0.05});
-  const cv::Vec3b soft = white.at<cv::Vec3b>(100 - box.y + alpha_box.y, alpha_box.x);
+  const cv::Vec3b& soft = white.at<cv::Vec3b>(100 - box.y + alpha_box.y, alpha_box.x);
   const cv::Vec3b full = photo.at<cv::Vec3b>(100, box.x);
   for (int c = 0; c < 3; ++c) EXPECT_NEAR(soft[c], 0.5 * full[c] + 0.5 * 255, 1.5) << c;
 }
@@ -184,9 +184,10 @@ texture::TexturedModel TwoSquares() {
   for (int s = 0; s < 2; ++s) {
     const float u0 = s == 0 ? 0.1f : 0.6f;
     for (int k = 0; k < 4; ++k) {
-      m.positions.emplace_back(0.1 * s + 0.05 * (k % 2), 0.0, 0.05 * (k / 2));
-      m.uvs.emplace_back(u0 + 0.3f * static_cast<float>(k % 2),
-                         0.1f + 0.3f * static_cast<float>(k / 2));
+      const int column = k % 2, row = k / 2;
+      m.positions.emplace_back(0.1 * s + 0.05 * column, 0.0, 0.05 * row);
+      m.uvs.emplace_back(u0 + 0.3f * static_cast<float>(column),
+                         0.1f + 0.3f * static_cast<float>(row));
     }
     const int b = 4 * s;
     m.triangles.emplace_back(b, b + 1, b + 3);
@@ -385,6 +386,7 @@ TEST(CatalogImagesTest, ASessionWith24StopsMakesItsSetFromThePhotos) {
   ASSERT_EQ(set.size(), 24u);
   // Entry k is the cut-out of the photo at the k-th table angle.
   std::vector<std::pair<double, int>> by_angle;
+  by_angle.reserve(24);
   for (int v = 0; v < 24; ++v)
     by_angle.emplace_back(manifest["views"][v]["table_angle_deg"].get<double>(), v);
   std::sort(by_angle.begin(), by_angle.end());

@@ -23,7 +23,7 @@ namespace {
 
 using test_support::CameraLookingAtOrigin;
 
-const cv::Vec3b kSquareBgr(200, 120, 40), kOccluderBgr(30, 30, 220), kBackdropBgr(128, 128, 128);
+const cv::Vec3b square_bgr(200, 120, 40), occluder_bgr(30, 30, 220), backdrop_bgr(128, 128, 128);
 
 // A square of `side` metres centred at (x, y, z), facing +Z, as two triangles.
 void AddSquare(Mesh* mesh, double side, const Eigen::Vector3d& centre) {
@@ -34,8 +34,8 @@ void AddSquare(Mesh* mesh, double side, const Eigen::Vector3d& centre) {
   mesh->add_face(a, c, d);
 }
 
-// The photo of `mesh` through `camera`: faces 0 and 1 (the square) in kSquareBgr, the others
-// (the occluder) in kOccluderBgr; its mask is the mesh's silhouette.
+// The photo of `mesh` through `camera`: faces 0 and 1 (the square) in square_bgr, the others
+// (the occluder) in occluder_bgr; its mask is the mesh's silhouette.
 View Photograph(const Mesh& mesh, const CameraModel& camera) {
   const MeshRaster raster = RasterizeMesh(mesh, camera);
   const cv::Mat ids = raster.FaceIds();
@@ -43,7 +43,7 @@ View Photograph(const Mesh& mesh, const CameraModel& camera) {
   for (int y = 0; y < photo.rows; ++y)
     for (int x = 0; x < photo.cols; ++x) {
       const int face = ids.at<int>(y, x);
-      if (face >= 0) photo.at<cv::Vec3b>(y, x) = face < 2 ? kSquareBgr : kOccluderBgr;
+      if (face >= 0) photo.at<cv::Vec3b>(y, x) = face < 2 ? square_bgr : occluder_bgr;
     }
   View view(camera, {});
   view.SetImage(photo);
@@ -105,7 +105,7 @@ TEST(TransferTest, TexelsHiddenInTheFrontViewComeFromAViewThatSeesThem) {
     ASSERT_TRUE(px);
     ASSERT_EQ(views[0].Image().at<cv::Vec3b>(static_cast<int>(std::lround(px->y())),
                                              static_cast<int>(std::lround(px->x()))),
-              kOccluderBgr);
+              occluder_bgr);
   }
   auto distance = [](const cv::Vec3b& a, const cv::Vec3b& b) {
     return cv::norm(cv::Vec3d(a[0], a[1], a[2]) - cv::Vec3d(b[0], b[1], b[2]));
@@ -119,9 +119,9 @@ TEST(TransferTest, TexelsHiddenInTheFrontViewComeFromAViewThatSeesThem) {
     for (const Eigen::Vector3d& p : hidden) {
       const cv::Vec3b texel = TexelAt(mesh, map.texture, 0, p);
       if (side > 0) {
-        EXPECT_LT(distance(texel, kSquareBgr), 10.0) << p.transpose();
+        EXPECT_LT(distance(texel, square_bgr), 10.0) << p.transpose();
       } else {
-        EXPECT_LT(distance(texel, kOccluderBgr), 10.0) << p.transpose();
+        EXPECT_LT(distance(texel, occluder_bgr), 10.0) << p.transpose();
       }
     }
     if (side > 0) {

@@ -33,7 +33,7 @@ std::uint8_t ByteOfLinear(float linear) {
   const float c = std::min(linear, 1.0f);
   const float srgb =
       c <= 0.0031308f ? 12.92f * c : 1.055f * std::pow(c, 1.0f / 2.4f) - 0.055f;  // 0..1
-  return static_cast<std::uint8_t>(std::clamp(255.0f * srgb, 0.0f, 255.0f) + 0.5f);
+  return static_cast<std::uint8_t>(std::lround(std::clamp(255.0f * srgb, 0.0f, 255.0f)));
 }
 
 // ---- texture sampling ---------------------------------------------------------------------
@@ -85,7 +85,7 @@ Eigen::Vector3f Trilinear(const std::vector<cv::Mat>& levels, float u, float v, 
   lod = std::clamp(lod, 0.0f, static_cast<float>(last));
   const int l0 = static_cast<int>(lod);
   const float f = lod - static_cast<float>(l0);
-  const Eigen::Vector3f a = Bilinear(levels[l0], u, v, wrap);
+  Eigen::Vector3f a = Bilinear(levels[l0], u, v, wrap);
   if (f < 1e-3f || l0 == last) return a;
   return (1 - f) * a + f * Bilinear(levels[l0 + 1], u, v, wrap);
 }
