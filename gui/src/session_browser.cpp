@@ -10,6 +10,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "carousel/core/error.h"
+#include "carousel/core/image_io.h"
 #include "carousel/core/logging.h"
 #include "carousel/studio/checksum.h"
 #include "carousel/studio/session.h"
@@ -40,20 +41,17 @@ std::string ReadBytes(const std::filesystem::path& path) {
   return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
 }
 
-// Decoded at a JPEG scale that keeps at least `size` pixels (libjpeg's scaled decode), then
-// resized down.
+// Decoded at a JPEG scale that keeps at least `size` pixels (libjpeg's scaled decode,
+// ImageReduction), then resized down.
 cv::Mat Thumbnail(const std::string& bytes, int size, int flags_full, int flags_2, int flags_4,
                   int flags_8, int full_long_side) {
   const cv::Mat raw(1, static_cast<int>(bytes.size()), CV_8UC1,
                     const_cast<char*>(bytes.data()));  // imdecode only reads it
-  int flags = flags_full;
-  if (full_long_side >= 8 * size) {
-    flags = flags_8;
-  } else if (full_long_side >= 4 * size) {
-    flags = flags_4;
-  } else if (full_long_side >= 2 * size) {
-    flags = flags_2;
-  }
+  const int reduction = ImageReduction(full_long_side, size);
+  const int flags = reduction == 8   ? flags_8
+                    : reduction == 4 ? flags_4
+                    : reduction == 2 ? flags_2
+                                     : flags_full;
   cv::Mat image = cv::imdecode(raw, flags);
   if (image.empty()) return image;
   const double scale = static_cast<double>(size) / std::max(image.cols, image.rows);
