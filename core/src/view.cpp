@@ -19,11 +19,15 @@ struct View::Cache {
 
 namespace {
 
+// A picture decoded at 1/`reduction` of its size is rounded up (JPEG) or down (the others)
+// from the camera's size over the reduction.
 void RequireSize(const std::filesystem::path& path, const cv::Mat& pixels,
-                 const CameraModel& camera, const char* what) {
-  if (pixels.cols != camera.width || pixels.rows != camera.height) {
-    throw FormatError(path, std::string(what) + " is " + std::to_string(pixels.cols) + "x" +
-                                std::to_string(pixels.rows) + " but its camera is " +
+                 const CameraModel& camera, const char* what, int reduction = 1) {
+  if (std::abs(pixels.cols * reduction - camera.width) >= reduction ||
+      std::abs(pixels.rows * reduction - camera.height) >= reduction) {
+    throw FormatError(path, std::string(what) + (reduction > 1 ? " is about " : " is ") +
+                                std::to_string(pixels.cols * reduction) + "x" +
+                                std::to_string(pixels.rows * reduction) + " but its camera is " +
                                 std::to_string(camera.width) + "x" + std::to_string(camera.height));
   }
 }
@@ -70,14 +74,7 @@ cv::Mat View::ImageAtLeast(int min_side) const {
   CAROUSEL_THROW_IF(image_path_.empty(), InvalidArgument,
                     "view '" << name_ << "' has no photo: neither a file nor pixels");
   cv::Mat image = ReadImage(image_path_, ImageReadMode::kColor, reduction);
-  // Rounded up (JPEG) or down (the others) from the camera's size over the reduction.
-  if (std::abs(image.cols * reduction - camera_.width) >= reduction ||
-      std::abs(image.rows * reduction - camera_.height) >= reduction) {
-    throw FormatError(image_path_, "photo is about " + std::to_string(image.cols * reduction) +
-                                       "x" + std::to_string(image.rows * reduction) +
-                                       " but its camera is " + std::to_string(camera_.width) + "x" +
-                                       std::to_string(camera_.height));
-  }
+  RequireSize(image_path_, image, camera_, "photo", reduction);
   return image;
 }
 
